@@ -1,0 +1,51 @@
+//! Command-line definition of `ips`.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "ips",
+    version,
+    about = "Align a simulation's virtual geometry with the real cell using a collaborative robot",
+    long_about = "ips is the IPS side of cobot-align. Today it evaluates robot kinematics from URDF \
+                  descriptions; exit code 0 means success, 2 bad input (with a one-line reason on stderr)."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Forward kinematics: the pose of one link relative to another at given joint values.
+    #[command(
+        after_help = "Example:\n  ips fk --urdf robots/ur10.urdf --base base_link --tip tool0 \\\n         --q 0,-1.57,1.57,-1.57,-1.57,0 --json"
+    )]
+    Fk(FkArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct FkArgs {
+    /// Robot description (URDF; expand xacro files first).
+    #[arg(long, value_name = "FILE")]
+    pub urdf: PathBuf,
+    /// Where a ROS package named in package:// mesh URIs lives; repeatable. Packages not given
+    /// are looked for among the URDF file's parent folders.
+    #[arg(long = "package-dir", value_name = "NAME=DIR")]
+    pub package_dirs: Vec<String>,
+    /// Link the pose is expressed in.
+    #[arg(long, value_name = "LINK")]
+    pub base: String,
+    /// Link whose pose is computed.
+    #[arg(long, value_name = "LINK")]
+    pub tip: String,
+    /// Joint values of the chain's movable joints from base to tip, comma-separated
+    /// (rad for revolute, m for prismatic). Use --q=-1,... when the first value is negative.
+    #[arg(long, value_name = "A,B,C,...", allow_hyphen_values = true)]
+    pub q: String,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+}

@@ -1,0 +1,61 @@
+//! `ips fk`: forward kinematics of any chain of a URDF robot.
+
+use align_core::kinematics::{PackageMap, RobotModel};
+use align_core::pose::{matrix_rows, xyz_rpy};
+use serde::Serialize;
+
+use crate::cli::FkArgs;
+use crate::{BadInput, parse_number_list};
+
+#[derive(Debug, Serialize)]
+pub struct FkOutput {
+    /// Homogeneous transform, 4 rows of 4 (row-major).
+    pub base_from_tip: [[f64; 4]; 4],
+    pub xyz: [f64; 3],
+    pub rpy: [f64; 3],
+    pub base: String,
+    pub tip: String,
+    pub joints: Vec<String>,
+    /// Mesh URIs that could not be resolved (kinematics does not need them).
+    pub warnings: Vec<String>,
+}
+
+pub fn run(args: &FkArgs) -> Result<FkOutput, BadInput> {
+    let mut packages = PackageMap::new();
+    for entry in &args.package_dirs {
+        let (name, dir) = PackageMap::parse_entry(entry).map_err(BadInput)?;
+        packages.insert(name, dir);
+    }
+    let model = RobotModel::from_urdf_file(&args.urdf, &packages).map_err(BadInput::new)?;
+    let chain = model.chain(&args.base, &args.tip).map_err(BadInput::new)?;
+    let q = parse_number_list(&args.q, "--q")?;
+    let base_from_tip = chain.forward(&q).map_err(BadInput::new)?;
+    let (xyz, rpy) = xyz_rpy(&base_from_tip);
+    Ok(FkOutput {
+        base_from_tip: matrix_rows(&base_from_tip),
+        xyz,
+        rpy,
+        base: args.base.clone(),
+        tip: args.tip.clone(),
+        joints: chain.joint_names().into_iter().map(str::to_owned).collect(),
+        warnings: model.mesh_problems(),
+    })
+}
+
+impl FkOutput {
+    pub fn to_text(&self) -> String {
+        let mut text = format!("base_from_tip ({} <- {}):\n", self.base, self.tip);
+        for row in &self.base_from_tip {
+            text += &format!(
+                "  [{:>12.9} {:>12.9} {:>12.9} {:>12.9}]\n",
+                row[0], row[1], row[2], row[3]
+            );
+        }
+        let [x, y, z] = self.xyz;
+        let [roll, pitch, yaw] = self.rpy;
+        text += &format!("xyz [m]:   {x:.9} {y:.9} {z:.9}\n");
+        text += &format!("rpy [rad]: {roll:.9} {pitch:.9} {yaw:.9}\n");
+        text += &format!("joints:    {}\n", self.joints.join(", "));
+        text
+    }
+}

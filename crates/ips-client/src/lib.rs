@@ -1,0 +1,35 @@
+//! The IPS side of cobot-align: the `ips` command-line tool. Each subcommand is a module with a
+//! `run` function returning its output; `bin/ips.rs` only parses arguments and maps errors to exit
+//! codes (0 success, 2 bad input with a one-line reason on stderr).
+
+pub mod cli;
+pub mod fk;
+
+/// An error the user caused (bad arguments, a missing or malformed file): exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadInput(pub String);
+
+impl BadInput {
+    pub fn new(message: impl std::fmt::Display) -> Self {
+        Self(message.to_string())
+    }
+}
+
+/// Parses a comma-separated list of numbers such as `0.1,-1.2,1.4`; `what` names the list in
+/// errors.
+pub fn parse_number_list(text: &str, what: &str) -> Result<Vec<f64>, BadInput> {
+    text.split(',')
+        .enumerate()
+        .map(|(index, item)| {
+            let item = item.trim();
+            match item.parse::<f64>() {
+                Ok(value) if value.is_finite() => Ok(value),
+                _ => Err(BadInput(format!(
+                    "{what}: item {} ('{item}') is not a finite number",
+                    index + 1
+                ))),
+            }
+        })
+        .collect()
+}
