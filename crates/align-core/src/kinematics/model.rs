@@ -257,10 +257,7 @@ impl RobotModel {
         }
         let first = link;
         let mut names = Vec::new();
-        loop {
-            let Some(joint) = self.parent_joint[link] else {
-                break;
-            };
+        while let Some(joint) = self.parent_joint[link] {
             names.push(format!("'{}'", self.joints[joint].name));
             link = self.joints[joint].parent;
             if link == first {
