@@ -1,0 +1,381 @@
+//! A part's surface as a triangle mesh with the queries registration needs.
+//!
+//! Duplicate vertices (every STL repeats them per triangle) are merged and degenerate triangles
+//! dropped, so that edges are shared and pseudo-normals exist. A closed, consistently oriented
+//! mesh answers with signed distances (negative inside) and with the angle-weighted pseudo-normal
+//! on edges and vertices (Baerentzen and Aanaes), which makes the sign right at convex and concave
+//! features alike. A mesh that is not closed or not orientable still works with unsigned distances
+//! and face normals; [`Mesh::is_watertight`] says which, and [`Mesh::notes`] why.
+
+use nalgebra::{Point3, Vector3};
+use parry3d_f64::math::Vector as GlamVector;
+use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshError {
+    #[error("the mesh has no triangles")]
+    Empty,
+    #[error("vertex {index} is not finite ({x}, {y}, {z})")]
+    NonFiniteVertex {
+        index: usize,
+        x: f64,
+        y: f64,
+        z: f64,
+    },
+    #[error("triangle {triangle} uses vertex {vertex}, but the mesh has {count} vertices")]
+    IndexOutOfRange {
+        triangle: usize,
+        vertex: u32,
+        count: usize,
+    },
+    #[error("every triangle of the mesh is degenerate (zero area)")]
+    AllDegenerate,
+    #[error("cannot build the mesh: {0}")]
+    Build(String),
+}
+
+/// The closest point of a mesh to a query point, in the mesh's frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfacePoint {
+    pub point: Point3<f64>,
+    /// Unit outward normal: the face normal inside a face, the pseudo-normal on an edge or vertex.
+    pub normal: Vector3<f64>,
+    /// Distance from the query point, negative inside a watertight mesh.
+    pub signed_distance: f64,
+    pub triangle: u32,
+    /// True when the closest point lies inside a triangle rather than on an edge or vertex.
+    pub on_face: bool,
+}
+
+#[derive(Debug, Clone)]
+pub struct Mesh {
+    trimesh: TriMesh,
+    watertight: bool,
+    notes: Vec<String>,
+    centroid: Point3<f64>,
+    radius_m: f64,
+}
+
+fn to_glam(p: &Point3<f64>) -> GlamVector {
+    GlamVector::new(p.x, p.y, p.z)
+}
+
+fn from_glam(v: GlamVector) -> Vector3<f64> {
+    Vector3::new(v.x, v.y, v.z)
+}
+
+impl Mesh {
+    /// Builds a mesh from vertices (m) and triangles.
+    pub fn new(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Result<Self, MeshError> {
+        if triangles.is_empty() {
+            return Err(MeshError::Empty);
+        }
+        if let Some((index, p)) = vertices
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.coords.iter().all(|c| c.is_finite()))
+        {
+            return Err(MeshError::NonFiniteVertex {
+                index,
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            });
+        }
+        for (triangle, indices) in triangles.iter().enumerate() {
+            if let Some(&vertex) = indices.iter().find(|&&i| i as usize >= vertices.len()) {
+                return Err(MeshError::IndexOutOfRange {
+                    triangle,
+                    vertex,
+                    count: vertices.len(),
+                });
+            }
+        }
+        let mut indices: Vec<[u32; 3]> = triangles.to_vec();
+        if signed_volume(vertices, &indices) < 0.0 {
+            // Inward-facing winding (common in exports): flip so normals point out.
+            for triangle in &mut indices {
+                triangle.swap(1, 2);
+            }
+        }
+        let points: Vec<GlamVector> = vertices.iter().map(to_glam).collect();
+        let cleanup = TriMeshFlags::MERGE_DUPLICATE_VERTICES
+            | TriMeshFlags::DELETE_DEGENERATE_TRIANGLES
+            | TriMeshFlags::DELETE_DUPLICATE_TRIANGLES;
+        let mut notes = Vec::new();
+        let (trimesh, watertight) = match TriMesh::with_flags(
+            points.clone(),
+            indices.clone(),
+            cleanup | TriMeshFlags::HALF_EDGE_TOPOLOGY | TriMeshFlags::ORIENTED,
+        ) {
+            Ok(mesh) => {
+                let closed = mesh
+                    .topology()
+                    .is_some_and(|topology| topology.half_edges.iter().all(|h| h.twin != u32::MAX));
+                if !closed {
+                    notes.push(
+                        "the mesh has boundary edges (not closed): distances are unsigned"
+                            .to_owned(),
+                    );
+                }
+                (mesh, closed)
+            }
+            Err(error) => {
+                notes.push(format!(
+                    "the mesh is not a consistently oriented manifold ({error}): distances are unsigned"
+                ));
+                let mesh = TriMesh::with_flags(points, indices, cleanup)
+                    .map_err(|error| MeshError::Build(error.to_string()))?;
+                (mesh, false)
+            }
+        };
+        if trimesh.num_triangles() == 0 {
+            return Err(MeshError::AllDegenerate);
+        }
+        let vertices = trimesh.vertices();
+        let centroid = vertices
+            .iter()
+            .fold(Vector3::zeros(), |sum, v| sum + from_glam(*v))
+            / vertices.len() as f64;
+        let centroid = Point3::from(centroid);
+        let radius_m = vertices
+            .iter()
+            .map(|v| (from_glam(*v) - centroid.coords).norm())
+            .fold(0.0, f64::max);
+        Ok(Self {
+            trimesh,
+            watertight,
+            notes,
+            centroid,
+            radius_m,
+        })
+    }
+
+    /// An axis-aligned box centred on the origin, outward-oriented.
+    pub fn cuboid(size_m: [f64; 3]) -> Result<Self, MeshError> {
+        let [hx, hy, hz] = size_m.map(|s| s / 2.0);
+        let vertices: Vec<Point3<f64>> = (0..8)
+            .map(|i| {
+                Point3::new(
+                    if i & 1 == 0 { -hx } else { hx },
+                    if i & 2 == 0 { -hy } else { hy },
+                    if i & 4 == 0 { -hz } else { hz },
+                )
+            })
+            .collect();
+        let triangles = [
+            [0, 2, 1],
+            [1, 2, 3], // z-
+            [4, 5, 6],
+            [5, 7, 6], // z+
+            [0, 1, 4],
+            [1, 5, 4], // y-
+            [2, 6, 3],
+            [3, 6, 7], // y+
+            [0, 4, 2],
+            [2, 4, 6], // x-
+            [1, 3, 5],
+            [3, 7, 5], // x+
+        ];
+        Self::new(&vertices, &triangles)
+    }
+
+    /// True when distances are signed (closed, consistently oriented mesh).
+    pub fn is_watertight(&self) -> bool {
+        self.watertight
+    }
+
+    /// Remarks on how the mesh was interpreted (e.g. why distances are unsigned).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
+    pub fn num_triangles(&self) -> usize {
+        self.trimesh.num_triangles()
+    }
+
+    pub fn vertices(&self) -> impl ExactSizeIterator<Item = Point3<f64>> + '_ {
+        self.trimesh
+            .vertices()
+            .iter()
+            .map(|v| Point3::from(from_glam(*v)))
+    }
+
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        self.trimesh.indices()
+    }
+
+    /// Unit normal of a triangle.
+    pub fn triangle_normal(&self, triangle: u32) -> Vector3<f64> {
+        from_glam(self.trimesh.triangle(triangle).scaled_normal()).normalize()
+    }
+
+    /// Area of a triangle, m^2.
+    pub fn triangle_area(&self, triangle: u32) -> f64 {
+        self.trimesh.triangle(triangle).area()
+    }
+
+    /// Mean of the vertices.
+    pub fn centroid(&self) -> Point3<f64> {
+        self.centroid
+    }
+
+    /// Largest vertex distance from the centroid: the object radius r of the thesis's pose
+    /// distance d = sqrt(|dt|^2 + (r da)^2).
+    pub fn radius_m(&self) -> f64 {
+        self.radius_m
+    }
+
+    /// Axis-aligned bounds (min, max) in the mesh frame.
+    pub fn bounds(&self) -> (Point3<f64>, Point3<f64>) {
+        let aabb = self.trimesh.local_aabb();
+        (
+            Point3::from(from_glam(aabb.mins)),
+            Point3::from(from_glam(aabb.maxs)),
+        )
+    }
+
+    /// The closest surface point to `query` (mesh frame), its outward normal and signed distance.
+    pub fn closest_point(&self, query: &Point3<f64>) -> SurfacePoint {
+        self.closest_point_within(query, f64::MAX)
+            .unwrap_or(SurfacePoint {
+                point: *query,
+                normal: Vector3::z(),
+                signed_distance: f64::INFINITY,
+                triangle: 0,
+                on_face: false,
+            })
+    }
+
+    /// Like [`Mesh::closest_point`], but `None` when no surface point lies within `max_distance_m`
+    /// (the BVH prunes the search, which makes far queries cheap).
+    pub fn closest_point_within(
+        &self,
+        query: &Point3<f64>,
+        max_distance_m: f64,
+    ) -> Option<SurfacePoint> {
+        let query_glam = to_glam(query);
+        let (projection, (triangle, location)) = self
+            .trimesh
+            .project_local_point_and_get_location_with_max_dist(
+                query_glam,
+                false,
+                max_distance_m,
+            )?;
+        let point = from_glam(projection.point);
+        let face_normal = self.triangle_normal(triangle);
+        let (normal, on_face) = match (location, self.trimesh.pseudo_normals_if_oriented()) {
+            (TrianglePointLocation::OnEdge(edge, _), Some(pseudo)) => (
+                from_glam(pseudo.edges_pseudo_normal[triangle as usize][edge as usize]),
+                false,
+            ),
+            (TrianglePointLocation::OnVertex(corner), Some(pseudo)) => {
+                let vertex = self.trimesh.indices()[triangle as usize][corner as usize];
+                (
+                    from_glam(pseudo.vertices_pseudo_normal[vertex as usize]),
+                    false,
+                )
+            }
+            (TrianglePointLocation::OnFace(..) | TrianglePointLocation::OnSolid, _) => {
+                (face_normal, true)
+            }
+            _ => (face_normal, false),
+        };
+        let normal = normal.try_normalize(1e-15).unwrap_or(face_normal);
+        let offset = query.coords - point;
+        let distance = offset.norm();
+        let signed_distance = if self.watertight && projection.is_inside {
+            -distance
+        } else {
+            distance
+        };
+        Some(SurfacePoint {
+            point: Point3::from(point),
+            normal,
+            signed_distance,
+            triangle,
+            on_face,
+        })
+    }
+}
+
+/// Six times the signed volume enclosed by the triangles (positive for outward winding).
+fn signed_volume(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|&[a, b, c]| {
+            let (a, b, c) = (
+                vertices[a as usize].coords,
+                vertices[b as usize].coords,
+                vertices[c as usize].coords,
+            );
+            a.dot(&b.cross(&c))
+        })
+        .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cube_distances_are_signed_with_pseudo_normals_at_edges_and_corners() {
+        let mesh = Mesh::cuboid([0.2, 0.2, 0.2]).unwrap();
+        assert!(mesh.is_watertight(), "{:?}", mesh.notes());
+        let outside = mesh.closest_point(&Point3::new(0.0, 0.0, 0.15));
+        assert!((outside.signed_distance - 0.05).abs() < 1e-12);
+        assert!((outside.normal - Vector3::z()).norm() < 1e-12);
+        assert!(outside.on_face);
+        let inside = mesh.closest_point(&Point3::new(0.0, 0.0, 0.08));
+        assert!((inside.signed_distance + 0.02).abs() < 1e-12);
+        // Beyond a corner the closest point is the corner, with the diagonal pseudo-normal.
+        let corner = mesh.closest_point(&Point3::new(0.2, 0.2, 0.2));
+        assert!((corner.point - Point3::new(0.1, 0.1, 0.1)).norm() < 1e-12);
+        assert!((corner.normal - Vector3::new(1.0, 1.0, 1.0).normalize()).norm() < 1e-9);
+        assert!(corner.signed_distance > 0.0);
+        assert!((mesh.radius_m() - 0.1 * 3f64.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn inward_winding_is_flipped_and_open_meshes_are_unsigned() {
+        let cube = Mesh::cuboid([1.0, 1.0, 1.0]).unwrap();
+        let vertices: Vec<_> = cube.vertices().collect();
+        let flipped: Vec<[u32; 3]> = cube
+            .triangles()
+            .iter()
+            .map(|t| [t[0], t[2], t[1]])
+            .collect();
+        let mesh = Mesh::new(&vertices, &flipped).unwrap();
+        let sample = mesh.closest_point(&Point3::new(0.0, 0.0, 0.4));
+        assert!(sample.signed_distance < 0.0);
+        assert!((sample.normal - Vector3::z()).norm() < 1e-12);
+
+        let open = Mesh::new(&vertices, &cube.triangles()[..10]).unwrap();
+        assert!(!open.is_watertight());
+        assert!(open.notes()[0].contains("unsigned"));
+        assert!(
+            open.closest_point(&Point3::new(0.0, 0.0, 0.4))
+                .signed_distance
+                > 0.0
+        );
+    }
+
+    #[test]
+    fn bad_meshes_are_rejected_with_the_reason() {
+        let p = Point3::new(0.0, 0.0, 0.0);
+        assert_eq!(Mesh::new(&[p], &[]).unwrap_err(), MeshError::Empty);
+        let error = Mesh::new(&[p, p, Point3::new(f64::NAN, 0.0, 0.0)], &[[0, 1, 2]]).unwrap_err();
+        assert_eq!(error.to_string(), "vertex 2 is not finite (NaN, 0, 0)");
+        let error = Mesh::new(&[p, p, p], &[[0, 1, 3]]).unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "triangle 0 uses vertex 3, but the mesh has 3 vertices"
+        );
+        let q = Point3::new(1.0, 0.0, 0.0);
+        assert_eq!(
+            Mesh::new(&[p, q, q], &[[0, 1, 2]]).unwrap_err(),
+            MeshError::AllDegenerate
+        );
+    }
+}

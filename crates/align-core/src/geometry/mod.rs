@@ -1,0 +1,6 @@
+//! Geometry the alignment works on: triangle meshes with closest-point, normal and signed-distance
+//! queries ([`Mesh`]), built on parry3d's BVH (glam types stay inside this module).
+
+mod mesh;
+
+pub use mesh::{Mesh, MeshError, SurfacePoint};
