@@ -12,6 +12,7 @@
 pub mod geometry;
 pub mod kinematics;
 pub mod pose;
+pub mod registration;
 pub mod robots;
 pub mod tool;
 
