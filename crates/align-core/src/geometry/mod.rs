@@ -2,5 +2,6 @@
 //! queries ([`Mesh`]), built on parry3d's BVH (glam types stay inside this module).
 
 mod mesh;
+pub mod shapes;
 
 pub use mesh::{Mesh, MeshError, SurfacePoint};

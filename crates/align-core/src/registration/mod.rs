@@ -6,6 +6,7 @@
 //! passes through the measurements given in the base frame.
 
 pub mod convergence;
+pub mod psa;
 pub mod svd;
 
 pub use convergence::{StopCriterion, pose_distance};
