@@ -15,6 +15,7 @@ pub mod pose;
 pub mod registration;
 pub mod robots;
 pub mod tool;
+pub mod trials;
 
 pub use kinematics::{Chain, IkError, IkOptions, IkSolution, ModelError, PackageMap, RobotModel};
 pub use tool::{Tool, ToolError};

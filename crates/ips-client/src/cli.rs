@@ -24,6 +24,31 @@ pub enum Command {
         after_help = "Example:\n  ips fk --urdf robots/ur10.urdf --base base_link --tip tool0 \\\n         --q 0,-1.57,1.57,-1.57,-1.57,0 --json"
     )]
     Fk(FkArgs),
+    /// The thesis's alignment trials (PSA): random displacements of a test part, recovered by
+    /// the thesis's method and by ours on the same seeds; prints the thesis's table.
+    #[command(
+        after_help = "Example:\n  ips trials --trials 50 --deltas 50,100,200,500,1000 > docs/psa-trials.md"
+    )]
+    Trials(TrialsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct TrialsArgs {
+    /// Trials per delta.
+    #[arg(long, default_value_t = 50)]
+    pub trials: usize,
+    /// Displacement bounds delta, mm, comma-separated.
+    #[arg(long, default_value = "50,100,200,500,1000")]
+    pub deltas: String,
+    /// Touch count (6 = 3-2-1, 9 = 3-2-1 plus top, back and the asymmetric step); default both.
+    #[arg(long)]
+    pub touches: Option<usize>,
+    /// Seed of the displacement generator.
+    #[arg(long, default_value_t = 2024)]
+    pub seed: u64,
+    /// Print one JSON document instead of Markdown tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]

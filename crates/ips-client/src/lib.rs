@@ -4,6 +4,7 @@
 
 pub mod cli;
 pub mod fk;
+pub mod trials;
 
 /// An error the user caused (bad arguments, a missing or malformed file): exit code 2.
 #[derive(Debug, thiserror::Error)]

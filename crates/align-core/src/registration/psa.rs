@@ -104,22 +104,27 @@ pub struct PsaOptions {
     pub ambiguity_relative: f64,
     /// Poses closer than this (thesis eq. 22) are the same solution, m.
     pub distinct_pose_m: f64,
+    /// Iterations that only translate the part before full steps begin (point-to-plane only).
+    /// The global search's starts use them: their orientation is a guess, their translation a
+    /// rough centroid match.
+    pub slide_first: usize,
 }
 
 impl Default for PsaOptions {
     fn default() -> Self {
         Self {
             method: PsaMethod::PointToPlane,
-            search: Search::Global { starts: 192 },
+            search: Search::Global { starts: 384 },
             tip_radius_m: 0.0,
             max_iterations: 300,
             window: 19,
             tolerance_m: 1e-9,
             coherence: true,
-            coherence_cone_rad: 70f64.to_radians(),
+            coherence_cone_rad: 45f64.to_radians(),
             ambiguity_tolerance_m: 1e-5,
             ambiguity_relative: 1.25,
             distinct_pose_m: 1e-3,
+            slide_first: 0,
         }
     }
 }
@@ -231,6 +236,16 @@ impl<'a> PsaTarget<'a> {
         cone_rad: f64,
     ) -> Option<SurfacePoint> {
         let cos_cone = cone_rad.cos();
+        // Usually the plain closest point is coherent, and then it is also the closest coherent
+        // one: one BVH query instead of one per bin.
+        let mut plain = self.mesh.closest_point(query);
+        let face_normal = self.mesh.triangle_normal(plain.triangle);
+        if face_normal.dot(facing) >= cos_cone {
+            // On an edge the pseudo-normal blends in the incoherent neighbour; the touched face's
+            // own normal is the one that constrains this touch.
+            plain.normal = face_normal;
+            return Some(plain);
+        }
         let bin_reach = (cone_rad + BIN_RADIUS_RAD).min(std::f64::consts::PI).cos();
         let mut best: Option<SurfacePoint> = None;
         for bin in &self.normal_bins {
@@ -333,17 +348,31 @@ pub fn align_touches(
                 .fold(Vector3::zeros(), |sum, touch| sum + touch.point.coords)
                 / touches.len() as f64;
             let part_centroid = target.mesh.centroid().coords;
+            // Exploration: a short stopping window and a coarse tolerance find where each start
+            // leads; only the poses that compete for best are then refined to full precision.
+            let explore = PsaOptions {
+                window: 3,
+                tolerance_m: 1e-6,
+                max_iterations: 30,
+                slide_first: 4,
+                ..options.clone()
+            };
+            let mut explorer = Workspace::new(target, touches, &explore)?;
             for rotation in spread_rotations(starts) {
                 let translation = centroid - rotation * part_centroid;
                 let start = Isometry3::from_parts(Translation3::from(translation), rotation);
-                solutions.push(workspace.run_local(&start));
+                solutions.push(explorer.run_local(&start));
             }
-            let (best, ambiguous_with) = choose(
-                solutions,
-                base_from_part_start,
-                target.mesh.radius_m(),
-                options,
-            );
+            let radius_m = target.mesh.radius_m();
+            let refined = contenders(solutions, radius_m, options)
+                .into_iter()
+                .map(|solution| {
+                    let mut refined = workspace.run_local(&solution.pose);
+                    refined.iterations += solution.iterations;
+                    refined
+                })
+                .collect();
+            let (best, ambiguous_with) = choose(refined, base_from_part_start, radius_m, options);
             (best, starts + 1, ambiguous_with)
         }
     };
@@ -393,6 +422,8 @@ struct LocalSolution {
     iterations: usize,
     converged: bool,
     rms_m: f64,
+    /// RMS plus the incoherence penalty: what solutions are ranked by.
+    score: f64,
 }
 
 /// Buffers reused across iterations and starts, so the hot loop does not allocate.
@@ -406,6 +437,8 @@ struct Workspace<'t> {
     normals: Vec<Vector3<f64>>,
     weights: Vec<f64>,
     fixed: Vec<Point3<f64>>,
+    /// Touches without a coherent surface at the last `correspond`.
+    incoherent: usize,
 }
 
 impl<'t> Workspace<'t> {
@@ -429,6 +462,7 @@ impl<'t> Workspace<'t> {
             normals: Vec::with_capacity(count),
             weights: Vec::with_capacity(count),
             fixed: touches.iter().map(|touch| touch.point).collect(),
+            incoherent: 0,
         })
     }
 
@@ -438,10 +472,12 @@ impl<'t> Workspace<'t> {
         self.moved.clear();
         self.normals.clear();
         self.weights.clear();
+        self.incoherent = 0;
         let part_from_base = pose.inverse();
         for (touch, surface) in self.touches.iter().zip(&self.surfaces) {
             let in_part = part_from_base * touch.point;
-            let closest = self.closest_for(touch, surface, &in_part, &part_from_base);
+            let (closest, coherent) = self.closest_for(touch, surface, &in_part, &part_from_base);
+            self.incoherent += usize::from(!coherent);
             let contact_centre = closest.point + closest.normal * self.options.tip_radius_m;
             self.moved.push(pose * contact_centre);
             self.normals.push(pose.rotation * closest.normal);
@@ -457,16 +493,29 @@ impl<'t> Workspace<'t> {
         surface: &Mesh,
         in_part: &Point3<f64>,
         part_from_base: &Isometry3<f64>,
-    ) -> SurfacePoint {
+    ) -> (SurfacePoint, bool) {
         if let (true, None, Some(approach)) = (self.options.coherence, &touch.face, touch.approach)
             && let Some(facing) = (part_from_base.rotation * -approach).try_normalize(1e-12)
-            && let Some(found) =
-                self.target
-                    .closest_coherent(in_part, &facing, self.options.coherence_cone_rad)
         {
-            return found;
+            return match self.target.closest_coherent(
+                in_part,
+                &facing,
+                self.options.coherence_cone_rad,
+            ) {
+                Some(found) => (found, true),
+                // No surface faces this probe at this pose: align to the nearest anyway, but the
+                // pose is penalised (see `score`).
+                None => (surface.closest_point(in_part), false),
+            };
         }
-        surface.closest_point(in_part)
+        (surface.closest_point(in_part), true)
+    }
+
+    /// What the local search minimises and the global search ranks: the RMS distance plus one
+    /// part radius per touch that no surface faces at this pose. Without the penalty a pose
+    /// could "fit" by aligning touches to faces the probe could not have touched.
+    fn score(&self) -> f64 {
+        self.rms() + self.incoherent as f64 * self.radius_m
     }
 
     /// RMS distance of the touches from the (ball-offset) surface at the current correspondences.
@@ -484,6 +533,13 @@ impl<'t> Workspace<'t> {
     /// overshot, typically when a correspondence jumps to another face) is halved until it does
     /// not, which keeps the iteration monotone like the thesis's ICP.
     fn run_local(&mut self, start: &Isometry3<f64>) -> LocalSolution {
+        self.run_local_from(start, self.options.slide_first)
+    }
+
+    /// A local alignment whose first `translation_only` iterations keep the orientation: from a
+    /// guessed orientation with a rough translation, sliding the part into place first keeps
+    /// the rotation from absorbing translation error (the global search's starts).
+    fn run_local_from(&mut self, start: &Isometry3<f64>, translation_only: usize) -> LocalSolution {
         let mut pose = *start;
         let mut stop =
             StopCriterion::new(self.options.window, self.options.tolerance_m, self.radius_m);
@@ -491,14 +547,15 @@ impl<'t> Workspace<'t> {
         let mut iterations = 0;
         stop.update(&pose);
         self.correspond(&pose);
-        let mut rms = self.rms();
+        let mut score = self.score();
         while iterations < self.options.max_iterations {
             iterations += 1;
+            let sliding = iterations <= translation_only;
             let step = match self.options.method {
                 PsaMethod::PointToPoint => weighted_svd(&self.moved, &self.fixed, &self.weights)
                     .ok()
                     .map(Twist::from_isometry),
-                PsaMethod::PointToPlane => self.point_to_plane_step(),
+                PsaMethod::PointToPlane => self.point_to_plane_step(sliding),
             };
             let Some(step) = step else {
                 break;
@@ -508,15 +565,16 @@ impl<'t> Workspace<'t> {
             loop {
                 candidate = step.scaled(fraction) * pose;
                 self.correspond(&candidate);
-                let candidate_rms = self.rms();
-                if candidate_rms <= rms * (1.0 + 1e-12) || fraction < 1.0 / 64.0 {
-                    rms = candidate_rms;
+                let candidate_score = self.score();
+                // While sliding, the orientation may still be wrong and the RMS need not fall.
+                if sliding || candidate_score <= score * (1.0 + 1e-12) || fraction < 1.0 / 64.0 {
+                    score = candidate_score;
                     break;
                 }
                 fraction *= 0.5;
             }
             pose = candidate;
-            if stop.update(&pose) {
+            if !sliding && stop.update(&pose) {
                 converged = true;
                 break;
             }
@@ -525,7 +583,8 @@ impl<'t> Workspace<'t> {
             pose,
             iterations,
             converged,
-            rms_m: rms,
+            rms_m: self.rms(),
+            score,
         }
     }
 
@@ -561,8 +620,19 @@ impl<'t> Workspace<'t> {
         (normal_matrix, rhs, centre)
     }
 
-    fn point_to_plane_step(&self) -> Option<Twist> {
+    fn point_to_plane_step(&self, translation_only: bool) -> Option<Twist> {
         let (normal_matrix, rhs, centre) = self.normal_equations();
+        if translation_only {
+            let block = normal_matrix.fixed_view::<3, 3>(3, 3).into_owned();
+            let translation = block
+                .cholesky()?
+                .solve(&rhs.fixed_rows::<3>(3).into_owned());
+            return Some(Twist {
+                omega: Vector3::zeros(),
+                translation,
+                centre,
+            });
+        }
         let solution = normal_matrix.cholesky()?.solve(&rhs);
         let scale = self.radius_m.max(1e-9);
         Some(Twist {
@@ -578,7 +648,7 @@ impl<'t> Workspace<'t> {
             .iter()
             .zip(&self.surfaces)
             .map(|(touch, surface)| {
-                let closest = self.closest_for(
+                let (closest, _) = self.closest_for(
                     touch,
                     surface,
                     &(part_from_base * touch.point),
@@ -671,6 +741,29 @@ fn check_constrained(
     Err(RegistrationError::Underconstrained { dof })
 }
 
+/// The distinct solutions that may end up equally good once refined: those within the
+/// ambiguity band of the best, with slack for the exploration's coarse tolerance.
+fn contenders(
+    mut solutions: Vec<LocalSolution>,
+    radius_m: f64,
+    options: &PsaOptions,
+) -> Vec<LocalSolution> {
+    solutions.sort_by(|a, b| a.score.total_cmp(&b.score));
+    let limit = solutions[0].score * options.ambiguity_relative * 2.0
+        + options.ambiguity_tolerance_m * 2.0
+        + 1e-5;
+    let mut distinct: Vec<LocalSolution> = Vec::new();
+    for solution in solutions.into_iter().take_while(|s| s.score <= limit) {
+        let seen = distinct.iter().any(|other| {
+            pose_distance(&other.pose, &solution.pose, radius_m) < options.distinct_pose_m
+        });
+        if !seen {
+            distinct.push(solution);
+        }
+    }
+    distinct
+}
+
 /// Picks the best-fitting solution; other distinct solutions fitting as well make it ambiguous.
 /// Among equally good poses the one nearest the start (the user's nominal pose) is reported.
 fn choose(
@@ -679,11 +772,12 @@ fn choose(
     radius_m: f64,
     options: &PsaOptions,
 ) -> (LocalSolution, Vec<Candidate>) {
-    solutions.sort_by(|a, b| a.rms_m.total_cmp(&b.rms_m));
-    let best_rms = solutions[0].rms_m;
+    solutions.sort_by(|a, b| a.score.total_cmp(&b.score));
+    let best_score = solutions[0].score;
     let mut distinct: Vec<LocalSolution> = Vec::new();
     for solution in solutions {
-        if solution.rms_m > best_rms * options.ambiguity_relative + options.ambiguity_tolerance_m {
+        if solution.score > best_score * options.ambiguity_relative + options.ambiguity_tolerance_m
+        {
             break;
         }
         let seen = distinct.iter().any(|other| {

@@ -1,0 +1,204 @@
+//! The thesis's AlignmentTests (section 2.3.4), reproduced: the part starts at its true pose,
+//! is displaced at random (t = beta mu, beta ~ U[0, delta]; R = exp(alpha mu'), alpha ~
+//! U[0, delta / r]; mu, mu' random unit vectors), and the alignment must bring it back. A trial
+//! succeeds when the final pose lies within 1 mm of the truth by the thesis's pose distance
+//! (eq. 22, with the part's radius r). The displacement turns the part about its centroid, so
+//! delta bounds how far its points move wherever it sits in the cell.
+//!
+//! The generator is seeded; the same seed gives the same trials for every method compared.
+
+pub mod parts;
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::geometry::Mesh;
+use crate::registration::convergence::pose_distance;
+use crate::registration::psa::{PsaOptions, PsaTarget, Touch, align_touches};
+use parts::TestPart;
+
+/// A trial passes when the final pose is this close to the truth (thesis eq. 22), m.
+pub const SUCCESS_THRESHOLD_M: f64 = 1e-3;
+
+/// One row of the thesis's result tables.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrialRow {
+    pub delta_m: f64,
+    pub succeeded: usize,
+    pub failed: usize,
+    /// Trials the method reported as ambiguous (counted in succeeded or failed by their pose).
+    pub ambiguous: usize,
+    pub mean_iterations: f64,
+    /// Mean final pose distance over all trials, as the thesis reports it.
+    pub mean_error_m: f64,
+    pub mean_time_s: f64,
+}
+
+/// Small deterministic generator (SplitMix64) so trials are identical on every machine.
+#[derive(Debug, Clone)]
+pub struct TrialRng(u64);
+
+impl TrialRng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// A standard normal sample (Box-Muller).
+    pub fn gaussian(&mut self) -> f64 {
+        let u = self.uniform().max(f64::MIN_POSITIVE);
+        let v = self.uniform();
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+
+    /// A random unit vector, uniform on the sphere.
+    pub fn unit_vector(&mut self) -> Vector3<f64> {
+        loop {
+            let v = Vector3::new(self.gaussian(), self.gaussian(), self.gaussian());
+            if let Some(unit) = v.try_normalize(1e-9) {
+                return unit;
+            }
+        }
+    }
+}
+
+/// The thesis's random displacement (eq. 27-31).
+pub fn random_displacement(rng: &mut TrialRng, delta_m: f64, radius_m: f64) -> Isometry3<f64> {
+    let direction = rng.unit_vector();
+    let axis = rng.unit_vector();
+    let beta = rng.uniform() * delta_m;
+    let alpha = rng.uniform() * delta_m / radius_m;
+    Isometry3::from_parts(
+        Translation3::from(direction * beta),
+        UnitQuaternion::from_scaled_axis(axis * alpha),
+    )
+}
+
+/// `base_from_part` displaced about the part's centroid.
+pub fn displace_about_centroid(
+    base_from_part: &Isometry3<f64>,
+    mesh: &Mesh,
+    displacement: &Isometry3<f64>,
+) -> Isometry3<f64> {
+    let centre = Isometry3::translation(mesh.centroid().x, mesh.centroid().y, mesh.centroid().z);
+    base_from_part * centre * displacement * centre.inverse()
+}
+
+/// Which touches the trial uses and what they carry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TouchSetup {
+    pub count: usize,
+    pub tip_radius_m: f64,
+    /// Label each touch with its planned face (CMM-style face hints).
+    pub face_hints: bool,
+    /// Give each touch its approach direction (the probe's axis, along the inward normal).
+    pub approach: bool,
+}
+
+/// Ball-centre touches of `part` at `base_from_part`, from its touch plan.
+pub fn plan_touches(
+    part: &TestPart,
+    base_from_part: &Isometry3<f64>,
+    setup: &TouchSetup,
+) -> Vec<Touch> {
+    part.touches
+        .iter()
+        .take(setup.count)
+        .enumerate()
+        .map(|(index, planned)| Touch {
+            id: (index + 1).to_string(),
+            point: base_from_part * (planned.point + planned.normal * setup.tip_radius_m),
+            approach: setup
+                .approach
+                .then(|| base_from_part.rotation * -planned.normal),
+            face: setup.face_hints.then(|| planned.face.clone()),
+        })
+        .collect()
+}
+
+/// Runs `trials` seeded PSA trials at each delta and summarises them as the thesis's table.
+/// `on_trial` is called after every trial (for progress output).
+pub fn run_psa_trials(
+    part: &TestPart,
+    setup: &TouchSetup,
+    options: &PsaOptions,
+    deltas_m: &[f64],
+    trials: usize,
+    seed: u64,
+    mut on_trial: impl FnMut(f64, usize),
+) -> Vec<TrialRow> {
+    let base_from_part = Isometry3::from_parts(
+        Translation3::new(0.6, 0.1, 0.05),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3),
+    );
+    let touches = plan_touches(part, &base_from_part, setup);
+    let target = match PsaTarget::new(&part.mesh).with_faces(&part.faces) {
+        Ok(target) => target,
+        Err(_) => PsaTarget::new(&part.mesh),
+    };
+    let options = PsaOptions {
+        tip_radius_m: setup.tip_radius_m,
+        ..options.clone()
+    };
+    let radius_m = part.mesh.radius_m();
+    deltas_m
+        .iter()
+        .map(|&delta_m| {
+            // Every method sees the same displacements for a given seed and delta.
+            let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
+            let mut row = TrialRow {
+                delta_m,
+                succeeded: 0,
+                failed: 0,
+                ambiguous: 0,
+                mean_iterations: 0.0,
+                mean_error_m: 0.0,
+                mean_time_s: 0.0,
+            };
+            for trial in 0..trials {
+                let displacement = random_displacement(&mut rng, delta_m, radius_m);
+                let start = displace_about_centroid(&base_from_part, &part.mesh, &displacement);
+                let started = Instant::now();
+                let result = align_touches(&target, &touches, &start, &options);
+                let elapsed = started.elapsed().as_secs_f64();
+                let (error, iterations, ambiguous) = match &result {
+                    Ok(result) => (
+                        pose_distance(&result.base_from_part, &base_from_part, radius_m),
+                        result.iterations,
+                        result.is_ambiguous(),
+                    ),
+                    // A refused alignment leaves the part where it started.
+                    Err(_) => (pose_distance(&start, &base_from_part, radius_m), 0, false),
+                };
+                if error < SUCCESS_THRESHOLD_M {
+                    row.succeeded += 1;
+                } else {
+                    row.failed += 1;
+                }
+                row.ambiguous += usize::from(ambiguous);
+                row.mean_iterations += iterations as f64;
+                row.mean_error_m += error;
+                row.mean_time_s += elapsed;
+                on_trial(delta_m, trial);
+            }
+            let count = trials.max(1) as f64;
+            row.mean_iterations /= count;
+            row.mean_error_m /= count;
+            row.mean_time_s /= count;
+            row
+        })
+        .collect()
+}
