@@ -2,6 +2,8 @@
 //! gimbal-lock origins, chains across branches, package:// meshes, ROS-Industrial extras; and every
 //! malformed description refused with a message naming the element at fault.
 
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
 use std::path::PathBuf;
 
 use align_core::kinematics::{ModelError, PackageMap, RobotModel};

@@ -1,6 +1,8 @@
 //! `ips fk` from the command line: the spawned binary, its text and JSON output, and one-line
 //! reasons with exit code 2 for bad input.
 
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
 use std::process::{Command, Output};
 
 use align_core::robots::ShippedRobot;
