@@ -358,10 +358,18 @@ pub fn align_touches(
                 ..options.clone()
             };
             let mut explorer = Workspace::new(target, touches, &explore)?;
+            let mut best_score = solutions[0].score;
             for rotation in spread_rotations(starts) {
                 let translation = centroid - rotation * part_centroid;
                 let start = Isometry3::from_parts(Translation3::from(translation), rotation);
-                solutions.push(explorer.run_local(&start));
+                // A start still far worse than the best after its first full steps is heading
+                // for another minimum: abandon it (it could at best tie, and ties that matter
+                // are found by the starts that get there directly).
+                explorer.abandon_above =
+                    Some((20.0 * best_score).max(0.02 * target.mesh.radius_m()));
+                let solution = explorer.run_local(&start);
+                best_score = best_score.min(solution.score);
+                solutions.push(solution);
             }
             let radius_m = target.mesh.radius_m();
             let refined = contenders(solutions, radius_m, options)
@@ -439,6 +447,8 @@ struct Workspace<'t> {
     fixed: Vec<Point3<f64>>,
     /// Touches without a coherent surface at the last `correspond`.
     incoherent: usize,
+    /// Abandon a local run whose score is still above this after its first full steps.
+    abandon_above: Option<f64>,
 }
 
 impl<'t> Workspace<'t> {
@@ -463,6 +473,7 @@ impl<'t> Workspace<'t> {
             weights: Vec::with_capacity(count),
             fixed: touches.iter().map(|touch| touch.point).collect(),
             incoherent: 0,
+            abandon_above: None,
         })
     }
 
@@ -573,9 +584,22 @@ impl<'t> Workspace<'t> {
                 }
                 fraction *= 0.5;
             }
+            let moved_m = pose_distance(&pose, &candidate, self.radius_m);
             pose = candidate;
             if !sliding && stop.update(&pose) {
                 converged = true;
+                break;
+            }
+            if !sliding && moved_m < self.options.tolerance_m * 1e-3 {
+                // Settled to far below the tolerance: every remaining iteration of the window
+                // would find the same correspondences and stay within it.
+                converged = true;
+                break;
+            }
+            if let Some(limit) = self.abandon_above
+                && iterations >= translation_only + 6
+                && score > limit
+            {
                 break;
             }
         }
