@@ -10,6 +10,7 @@
 //! point in the base frame.
 
 pub mod geometry;
+pub mod io;
 pub mod kinematics;
 pub mod pose;
 pub mod registration;
