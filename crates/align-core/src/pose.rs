@@ -14,8 +14,22 @@ pub fn isometry_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
 /// URDF roll-pitch-yaw of a rotation; at pitch = +-pi/2 roll is set to zero and yaw carries the
 /// remaining rotation, so the result always reproduces the rotation.
 pub fn rpy_from_rotation(rotation: &UnitQuaternion<f64>) -> [f64; 3] {
-    let (roll, pitch, yaw) = rotation.euler_angles();
-    [roll, pitch, yaw]
+    // From R = Rz(yaw) Ry(pitch) Rx(roll). Pitch comes from atan2 rather than asin(-r20), which
+    // loses half the digits near +-pi/2 (nalgebra's euler_angles does that).
+    let r = rotation.to_rotation_matrix();
+    let r = r.matrix();
+    let cos_pitch = r[(0, 0)].hypot(r[(1, 0)]);
+    let pitch = (-r[(2, 0)]).atan2(cos_pitch);
+    if cos_pitch < 1e-12 {
+        // Gimbal lock: only yaw - roll (or yaw + roll) is defined; put it all in yaw.
+        [0.0, pitch, (-r[(0, 1)]).atan2(r[(1, 1)])]
+    } else {
+        [
+            r[(2, 1)].atan2(r[(2, 2)]),
+            pitch,
+            r[(1, 0)].atan2(r[(0, 0)]),
+        ]
+    }
 }
 
 /// Translation and roll-pitch-yaw of a transform.
