@@ -30,6 +30,28 @@ pub enum Command {
         after_help = "Example:\n  ips trials --trials 50 --deltas 50,100,200,500,1000 > docs/psa-trials.md"
     )]
     Trials(TrialsArgs),
+    /// Point Set Alignment: move the session's part until it matches its inspections.
+    #[command(after_help = "Example:\n  ips align examples/step_block_ur10/session.json --json")]
+    Align(AlignArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct AlignArgs {
+    /// Session file (cobot-align/session@1; paths inside are relative to it).
+    #[arg(value_name = "SESSION")]
+    pub session: PathBuf,
+    /// One local alignment from the nominal pose (the thesis's behaviour), no global search.
+    #[arg(long)]
+    pub local: bool,
+    /// Use the thesis's SVD (point-to-point) step instead of point-to-plane.
+    #[arg(long)]
+    pub point_to_point: bool,
+    /// Ignore the probe's approach direction when matching touches to faces.
+    #[arg(long)]
+    pub no_coherence: bool,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]

@@ -2,8 +2,10 @@
 //! `run` function returning its output; `bin/ips.rs` only parses arguments and maps errors to exit
 //! codes (0 success, 2 bad input with a one-line reason on stderr).
 
+pub mod align;
 pub mod cli;
 pub mod fk;
+pub mod session;
 pub mod trials;
 
 /// An error the user caused (bad arguments, a missing or malformed file): exit code 2.

@@ -1,0 +1,200 @@
+//! The session file (DESIGN.md 6.3, `cobot-align/session@1`): robot, tool, part and the
+//! inspections taken, with paths relative to the file. Loading it resolves everything the
+//! alignment needs: the chain, the tool, the part's mesh and the touches in the base frame.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use align_core::geometry::Mesh;
+use align_core::io::read_mesh;
+use align_core::kinematics::{Chain, PackageMap, RobotModel};
+use align_core::pose::isometry_from_xyz_rpy;
+use align_core::registration::psa::{Face, Touch};
+use align_core::tool::Tool;
+use nalgebra::{Isometry3, Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::BadInput;
+
+pub const FORMAT: &str = "cobot-align/session@1";
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SessionFile {
+    pub format: String,
+    pub robot: RobotSection,
+    pub tool: ToolSection,
+    pub part: PartSection,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_sigma: Option<f64>,
+    pub inspections: Vec<Inspection>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RobotSection {
+    pub urdf: String,
+    pub base_link: String,
+    pub tip_link: String,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub package_dirs: BTreeMap<String, String>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PoseSection {
+    pub xyz: [f64; 3],
+    pub rpy: [f64; 3],
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ToolSection {
+    pub tcp: PoseSection,
+    #[serde(default)]
+    pub tip_radius: f64,
+    #[serde(default)]
+    pub mass: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PartSection {
+    pub mesh: String,
+    #[serde(default = "unit_scale")]
+    pub mesh_scale: f64,
+    pub nominal_pose: PoseSection,
+    /// Named planar faces (datum features) inspections may refer to; an extension of 6.3.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faces: Vec<FaceSection>,
+}
+
+fn unit_scale() -> f64 {
+    1.0
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FaceSection {
+    pub name: String,
+    /// Outward normal in the part frame.
+    pub normal: [f64; 3],
+    /// A point of the face's plane in the part frame, m.
+    pub point: [f64; 3],
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Inspection {
+    pub id: String,
+    pub q: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub qd: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stamp: Option<f64>,
+    /// The part face this touch was meant for (a face hint); an extension of 6.3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face: Option<String>,
+}
+
+/// A session with everything resolved.
+#[derive(Debug)]
+pub struct LoadedSession {
+    pub file: SessionFile,
+    pub chain: Chain,
+    pub tool: Tool,
+    pub mesh: Mesh,
+    pub faces: Vec<Face>,
+    pub base_from_part_nominal: Isometry3<f64>,
+    pub touches: Vec<Touch>,
+}
+
+fn pose(section: &PoseSection, what: &str) -> Result<Isometry3<f64>, BadInput> {
+    if section
+        .xyz
+        .iter()
+        .chain(&section.rpy)
+        .all(|v| v.is_finite())
+    {
+        Ok(isometry_from_xyz_rpy(section.xyz, section.rpy))
+    } else {
+        Err(BadInput(format!("{what} has a non-finite value")))
+    }
+}
+
+impl LoadedSession {
+    pub fn load(path: &Path) -> Result<Self, BadInput> {
+        let text = std::fs::read_to_string(path).map_err(|error| {
+            BadInput(format!("cannot read session '{}': {error}", path.display()))
+        })?;
+        let file: SessionFile = serde_json::from_str(&text)
+            .map_err(|error| BadInput(format!("session '{}': {error}", path.display())))?;
+        if file.format != FORMAT {
+            return Err(BadInput(format!(
+                "session '{}': format '{}' is not '{FORMAT}'",
+                path.display(),
+                file.format
+            )));
+        }
+        let folder = path.parent().unwrap_or(Path::new("."));
+        Self::resolve(file, folder)
+    }
+
+    pub fn resolve(file: SessionFile, folder: &Path) -> Result<Self, BadInput> {
+        let relative = |p: &str| -> PathBuf { folder.join(p) };
+        let mut packages = PackageMap::new();
+        for (name, dir) in &file.robot.package_dirs {
+            packages.insert(name.clone(), relative(dir));
+        }
+        let model = RobotModel::from_urdf_file(&relative(&file.robot.urdf), &packages)
+            .map_err(BadInput::new)?;
+        let chain = model
+            .chain(&file.robot.base_link, &file.robot.tip_link)
+            .map_err(BadInput::new)?;
+        let tool = Tool::new(
+            pose(&file.tool.tcp, "tool.tcp")?,
+            file.tool.tip_radius,
+            file.tool.mass,
+        )
+        .map_err(BadInput::new)?;
+        let soup =
+            read_mesh(&relative(&file.part.mesh), file.part.mesh_scale).map_err(BadInput::new)?;
+        let mesh = Mesh::new(&soup.vertices, &soup.triangles)
+            .map_err(|error| BadInput(format!("part mesh '{}': {error}", file.part.mesh)))?;
+        let faces = file
+            .part
+            .faces
+            .iter()
+            .map(|face| Face {
+                name: face.name.clone(),
+                normal: Vector3::from(face.normal),
+                point: Point3::from(face.point),
+            })
+            .collect();
+        let base_from_part_nominal = pose(&file.part.nominal_pose, "part.nominal_pose")?;
+        if let Some(sigma) = file.noise_sigma
+            && !(sigma.is_finite() && sigma >= 0.0)
+        {
+            return Err(BadInput(format!(
+                "noise_sigma must be finite and >= 0, got {sigma}"
+            )));
+        }
+        let mut touches = Vec::with_capacity(file.inspections.len());
+        for inspection in &file.inspections {
+            let base_from_flange = chain
+                .forward(&inspection.q)
+                .map_err(|error| BadInput(format!("inspection '{}': {error}", inspection.id)))?;
+            let base_from_tcp = tool.base_from_tcp(&base_from_flange);
+            touches.push(Touch {
+                id: inspection.id.clone(),
+                point: Point3::from(base_from_tcp.translation.vector),
+                // The probe points along the TCP's z axis: that is the direction it travels into
+                // the surface.
+                approach: Some(base_from_tcp.rotation * Vector3::z()),
+                face: inspection.face.clone(),
+            });
+        }
+        Ok(Self {
+            file,
+            chain,
+            tool,
+            mesh,
+            faces,
+            base_from_part_nominal,
+            touches,
+        })
+    }
+}
