@@ -6,7 +6,9 @@
 //! passes through the measurements given in the base frame.
 
 pub mod convergence;
+pub mod pca;
 pub mod psa;
+pub mod sampling;
 pub mod svd;
 
 pub use convergence::{StopCriterion, pose_distance};

@@ -7,6 +7,7 @@
 //!
 //! The generator is seeded; the same seed gives the same trials for every method compared.
 
+pub mod clouds;
 pub mod parts;
 
 use std::time::Instant;
@@ -15,7 +16,9 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
+use crate::registration::pca::{PcaOptions, align_cloud};
 use crate::registration::psa::{PsaOptions, PsaTarget, Touch, align_touches};
+use clouds::{ScanOptions, scan_part};
 use parts::TestPart;
 
 /// A trial passes when the final pose is this close to the truth (thesis eq. 22), m.
@@ -140,10 +143,7 @@ pub fn run_psa_trials(
     seed: u64,
     mut on_trial: impl FnMut(f64, usize),
 ) -> Vec<TrialRow> {
-    let base_from_part = Isometry3::from_parts(
-        Translation3::new(0.6, 0.1, 0.05),
-        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3),
-    );
+    let base_from_part = trial_pose();
     let touches = plan_touches(part, &base_from_part, setup);
     let target = match PsaTarget::new(&part.mesh).with_faces(&part.faces) {
         Ok(target) => target,
@@ -189,6 +189,73 @@ pub fn run_psa_trials(
                     row.failed += 1;
                 }
                 row.ambiguous += usize::from(ambiguous);
+                row.mean_iterations += iterations as f64;
+                row.mean_error_m += error;
+                row.mean_time_s += elapsed;
+                on_trial(delta_m, trial);
+            }
+            let count = trials.max(1) as f64;
+            row.mean_iterations /= count;
+            row.mean_error_m /= count;
+            row.mean_time_s /= count;
+            row
+        })
+        .collect()
+}
+
+/// The cell pose the trials place the part at.
+pub fn trial_pose() -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(0.6, 0.1, 0.05),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3),
+    )
+}
+
+/// Runs `trials` seeded PCA trials at each delta (delta is also the user's bound passed to the
+/// alignment, as in the thesis) on one scan of the part at its true pose.
+pub fn run_pca_trials(
+    part: &TestPart,
+    scan: &ScanOptions,
+    options: &PcaOptions,
+    deltas_m: &[f64],
+    trials: usize,
+    seed: u64,
+    mut on_trial: impl FnMut(f64, usize),
+) -> Vec<TrialRow> {
+    let base_from_part = trial_pose();
+    let cloud = scan_part(&part.mesh, &base_from_part, scan);
+    let radius_m = part.mesh.radius_m();
+    deltas_m
+        .iter()
+        .map(|&delta_m| {
+            let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
+            let mut row = TrialRow {
+                delta_m,
+                succeeded: 0,
+                failed: 0,
+                ambiguous: 0,
+                mean_iterations: 0.0,
+                mean_error_m: 0.0,
+                mean_time_s: 0.0,
+            };
+            for trial in 0..trials {
+                let displacement = random_displacement(&mut rng, delta_m, radius_m);
+                let start = displace_about_centroid(&base_from_part, &part.mesh, &displacement);
+                let started = Instant::now();
+                let result = align_cloud(&part.mesh, &cloud, &start, delta_m, options);
+                let elapsed = started.elapsed().as_secs_f64();
+                let (error, iterations) = match &result {
+                    Ok(result) => (
+                        pose_distance(&result.base_from_part, &base_from_part, radius_m),
+                        result.iterations,
+                    ),
+                    Err(_) => (pose_distance(&start, &base_from_part, radius_m), 0),
+                };
+                if error < SUCCESS_THRESHOLD_M {
+                    row.succeeded += 1;
+                } else {
+                    row.failed += 1;
+                }
                 row.mean_iterations += iterations as f64;
                 row.mean_error_m += error;
                 row.mean_time_s += elapsed;

@@ -1,0 +1,458 @@
+//! Point Cloud Alignment (thesis 3.1.3): move a part's mesh until it matches a scanner cloud that
+//! also holds everything else in the cell.
+//!
+//! The cloud is downsampled once to voxel centroids. Each iteration then keeps the keypoints
+//! inside the part's bounding box grown by delta (cut-off filter) and within delta of its surface
+//! (measure filter), weights each by w = cos(d / delta * pi / 2), so that points at the edge of
+//! the search band fade out instead of jumping in and out, and moves the part by a weighted step.
+//! Delta shrinks from the user's bound delta0 to delta_min over 100 iterations, so the search
+//! starts wide and coarse and ends narrow, with the clutter far outside the band.
+//!
+//! Steps: the thesis's weighted SVD ([`PcaStep::PointToPoint`]), or (default) the weighted
+//! linearised point-to-plane step, which converges in a few iterations once the part is close,
+//! so the stopping criterion ends the run long before the schedule does.
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
+use rayon::prelude::*;
+
+use super::convergence::StopCriterion;
+use super::psa::spread_rotations;
+use super::sampling::{voxel_centroids, voxel_representatives};
+use super::svd::weighted_svd;
+use crate::geometry::Mesh;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PcaStep {
+    PointToPoint,
+    PointToPlane,
+}
+
+/// How delta shrinks over the schedule (thesis eq. 33 and the variant its code used).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeltaSchedule {
+    /// delta_i = (delta0 - delta_min) cos(i / n * pi / 2) + delta_min (eq. 33).
+    Cosine,
+    /// delta_i = (delta0 - delta_min) cos^2(i / n * pi / 2) + delta_min: shrinks faster early.
+    CosineSquared,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PcaOptions {
+    pub step: PcaStep,
+    pub schedule: DeltaSchedule,
+    pub delta_min_m: f64,
+    /// Iterations over which delta shrinks to `delta_min_m` (thesis: 100).
+    pub schedule_iterations: usize,
+    pub max_iterations: usize,
+    /// Voxel edge of the keypoint downsampling, m.
+    pub voxel_m: f64,
+    /// Keypoints are voxel centroids (the thesis) rather than the cloud point nearest each
+    /// centroid (default: centroids of voxels straddling an edge lie off the surface and bias
+    /// the fit by a fraction of the voxel size).
+    pub voxel_centroids: bool,
+    pub window: usize,
+    pub tolerance_m: f64,
+    /// Parallel correspondence search (rayon); off gives the single-thread timing.
+    pub parallel: bool,
+    /// Orientations explored around the start before the full run (0: none, the thesis's
+    /// behaviour). Only those within the rotation delta allows are used.
+    pub starts: usize,
+}
+
+impl Default for PcaOptions {
+    fn default() -> Self {
+        Self {
+            step: PcaStep::PointToPlane,
+            // Eq. 33 as printed: the slower early shrinking keeps more of the part's points in
+            // the band while a large initial error is corrected.
+            schedule: DeltaSchedule::Cosine,
+            delta_min_m: 0.01,
+            schedule_iterations: 100,
+            max_iterations: 300,
+            voxel_m: 0.005,
+            voxel_centroids: false,
+            window: 19,
+            // 50 um: well below the 1 mm success bar, above the jitter that noisy correspondences
+            // and coplanar clutter (a floor flush with the part's base) leave in the pose.
+            tolerance_m: 5e-5,
+            parallel: true,
+            starts: 48,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PcaError {
+    #[error("the cloud is empty")]
+    EmptyCloud,
+    #[error("cloud point {0} is not finite")]
+    NonFinitePoint(usize),
+    #[error("delta must be finite and > 0, got {0}")]
+    BadDelta(f64),
+    #[error(
+        "only {kept} cloud points lie within delta = {delta_m} m of the part at the start pose (at least 6 needed): is the start pose right and delta large enough?"
+    )]
+    TooFewPoints { kept: usize, delta_m: f64 },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PcaResult {
+    pub base_from_part: Isometry3<f64>,
+    pub iterations: usize,
+    pub converged: bool,
+    /// RMS and max distance of the points kept in the last iteration, m.
+    pub rms_m: f64,
+    pub max_m: f64,
+    pub keypoints: usize,
+    pub kept: usize,
+    pub final_delta_m: f64,
+    /// Runs made: the start, plus the exploration's.
+    pub starts: usize,
+    pub time_s: f64,
+}
+
+fn delta_at(iteration: usize, delta0: f64, options: &PcaOptions) -> f64 {
+    let delta_min = options.delta_min_m.min(delta0);
+    let fraction = (iteration as f64 / options.schedule_iterations.max(1) as f64).min(1.0);
+    let cos = (fraction * std::f64::consts::FRAC_PI_2).cos();
+    let shape = match options.schedule {
+        DeltaSchedule::Cosine => cos,
+        DeltaSchedule::CosineSquared => cos * cos,
+    };
+    (delta0 - delta_min) * shape + delta_min
+}
+
+/// One kept keypoint: where it is (base), its surface correspondence (base) and normal.
+#[derive(Debug, Clone, Copy)]
+struct Match {
+    point: Point3<f64>,
+    surface: Point3<f64>,
+    normal: Vector3<f64>,
+    distance: f64,
+    weight: f64,
+}
+
+/// Aligns the part's mesh to `cloud` (base frame) from `base_from_part_start`, with `delta0_m`
+/// the user's bound on how far the start is from the truth.
+pub fn align_cloud(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    base_from_part_start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Result<PcaResult, PcaError> {
+    let started = Instant::now();
+    if cloud.is_empty() {
+        return Err(PcaError::EmptyCloud);
+    }
+    if let Some(index) = cloud
+        .iter()
+        .position(|p| !p.coords.iter().all(|c| c.is_finite()))
+    {
+        return Err(PcaError::NonFinitePoint(index));
+    }
+    if !(delta0_m.is_finite() && delta0_m > 0.0) {
+        return Err(PcaError::BadDelta(delta0_m));
+    }
+    let keypoints = if options.voxel_centroids {
+        voxel_centroids(cloud, options.voxel_m)
+    } else {
+        voxel_representatives(cloud, options.voxel_m)
+    };
+    let bounds = mesh.bounds();
+    let first = correspond(
+        mesh,
+        &keypoints,
+        base_from_part_start,
+        delta0_m,
+        (&bounds.0, &bounds.1),
+        options.parallel,
+    );
+    if first.len() < 6 {
+        return Err(PcaError::TooFewPoints {
+            kept: first.len(),
+            delta_m: delta0_m,
+        });
+    }
+    let mut start = *base_from_part_start;
+    let mut starts = 1;
+    let mut schedule_from = delta0_m;
+    if options.starts > 0 {
+        let (best, explored) = explore(mesh, cloud, base_from_part_start, delta0_m, options);
+        start = best;
+        starts += explored;
+        // The exploration ended within a few voxels of its optimum: refining from a wide band
+        // again would only let the clutter back in.
+        schedule_from = delta0_m.min(3.0 * options.delta_min_m);
+    }
+    let run = run_schedule(mesh, &keypoints, &start, schedule_from, options);
+    let final_matches = correspond(
+        mesh,
+        &keypoints,
+        &run.pose,
+        run.delta,
+        (&bounds.0, &bounds.1),
+        options.parallel,
+    );
+    let (sum, max) = final_matches.iter().fold((0.0, 0.0f64), |(sum, max), m| {
+        (sum + m.distance * m.distance, max.max(m.distance))
+    });
+    Ok(PcaResult {
+        base_from_part: run.pose,
+        iterations: run.iterations,
+        converged: run.converged,
+        rms_m: (sum / final_matches.len().max(1) as f64).sqrt(),
+        max_m: max,
+        keypoints: keypoints.len(),
+        kept: final_matches.len(),
+        final_delta_m: run.delta,
+        starts,
+        time_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+struct ScheduleRun {
+    pose: Isometry3<f64>,
+    iterations: usize,
+    converged: bool,
+    delta: f64,
+}
+
+/// One run of the thesis's loop: filters, weights and a step per iteration while delta shrinks.
+fn run_schedule(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> ScheduleRun {
+    let (lower, upper) = mesh.bounds();
+    let radius_m = mesh.radius_m();
+    let mut pose = *start;
+    let mut stop = StopCriterion::new(options.window, options.tolerance_m, radius_m);
+    stop.update(&pose);
+    let mut iterations = 0;
+    let mut converged = false;
+    let mut delta = delta0_m;
+    while iterations < options.max_iterations {
+        delta = delta_at(iterations, delta0_m, options);
+        iterations += 1;
+        let matches = correspond(
+            mesh,
+            keypoints,
+            &pose,
+            delta,
+            (&lower, &upper),
+            options.parallel,
+        );
+        if matches.len() < 6 {
+            break;
+        }
+        let step = match options.step {
+            PcaStep::PointToPoint => {
+                let moving: Vec<_> = matches.iter().map(|m| m.surface).collect();
+                let fixed: Vec<_> = matches.iter().map(|m| m.point).collect();
+                let weights: Vec<_> = matches.iter().map(|m| m.weight).collect();
+                weighted_svd(&moving, &fixed, &weights).ok()
+            }
+            PcaStep::PointToPlane => point_to_plane(&matches, radius_m),
+        };
+        let Some(step) = step else {
+            break;
+        };
+        pose = step * pose;
+        if stop.update(&pose) {
+            converged = true;
+            break;
+        }
+    }
+    ScheduleRun {
+        pose,
+        iterations,
+        converged,
+        delta,
+    }
+}
+
+/// How well a pose explains the scan: keypoints on the surface (within `band`) count for it,
+/// keypoints deep inside the part count against it twice, since a scanner cannot see into a
+/// solid. Clutter neither helps nor hurts a pose it does not touch.
+fn consensus(mesh: &Mesh, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, band: f64) -> f64 {
+    let part_from_base = pose.inverse();
+    let (lower, upper) = mesh.bounds();
+    keypoints
+        .iter()
+        .map(|p| part_from_base * p)
+        .filter(|p| {
+            (0..3).all(|axis| p[axis] >= lower[axis] - band && p[axis] <= upper[axis] + band)
+        })
+        .map(|p| {
+            let closest = mesh.closest_point(&p);
+            if closest.signed_distance.abs() <= band {
+                1.0
+            } else if closest.signed_distance < -band && mesh.is_watertight() {
+                -2.0
+            } else {
+                0.0
+            }
+        })
+        .sum()
+}
+
+/// Global exploration for large deltas: short runs on coarse keypoints from the start and from
+/// the start turned about the part's centroid by rotations spread over the ball the user's delta
+/// allows; returns the start of the run with the best consensus and how many runs were made.
+fn explore(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> (Isometry3<f64>, usize) {
+    let coarse = voxel_representatives(cloud, options.voxel_m * 3.0);
+    let short = PcaOptions {
+        max_iterations: 40,
+        window: 3,
+        tolerance_m: 1e-5,
+        ..options.clone()
+    };
+    let band = (options.voxel_m * 2.0).max(options.delta_min_m * 0.3);
+    let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
+    let centre = mesh.centroid();
+    let about_centre = Isometry3::translation(centre.x, centre.y, centre.z);
+    let mut candidates = vec![*start];
+    for rotation in spread_rotations(options.starts) {
+        if rotation.angle() <= max_angle {
+            candidates.push(
+                start
+                    * about_centre
+                    * Isometry3::from_parts(Translation3::identity(), rotation)
+                    * about_centre.inverse(),
+            );
+        }
+    }
+    let scored: Vec<(f64, Isometry3<f64>)> = candidates
+        .par_iter()
+        .map(|candidate| {
+            let run = run_schedule(
+                mesh,
+                &coarse,
+                candidate,
+                delta0_m,
+                &PcaOptions {
+                    parallel: false,
+                    ..short.clone()
+                },
+            );
+            (consensus(mesh, &coarse, &run.pose, band), run.pose)
+        })
+        .collect();
+    let best = scored
+        .iter()
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(*start, |(_, pose)| *pose);
+    (best, candidates.len() - 1)
+}
+
+const EDGE_REJECTION_M: f64 = 1e-3;
+
+/// Cut-off and measure filters, then the surface correspondence and weight of each keypoint.
+fn correspond(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    delta: f64,
+    (lower, upper): (&Point3<f64>, &Point3<f64>),
+    parallel: bool,
+) -> Vec<Match> {
+    let part_from_base = pose.inverse();
+    let one = |point: &Point3<f64>| -> Option<Match> {
+        let in_part = part_from_base * point;
+        let inside_box = (0..3).all(|axis| {
+            in_part[axis] >= lower[axis] - delta && in_part[axis] <= upper[axis] + delta
+        });
+        if !inside_box {
+            return None;
+        }
+        let closest = mesh.closest_point_within(&in_part, delta)?;
+        let distance = closest.signed_distance.abs();
+        // A point whose nearest surface is an edge or corner, more than a millimetre off, lies
+        // beyond the part: typically the floor or a fixture meeting it. Such points only drag
+        // the part's edges towards the clutter.
+        if !closest.on_face && distance > EDGE_REJECTION_M {
+            return None;
+        }
+        let weight = (distance / delta * std::f64::consts::FRAC_PI_2).cos();
+        (weight > 0.0).then(|| Match {
+            point: *point,
+            surface: pose * closest.point,
+            normal: pose.rotation * closest.normal,
+            distance,
+            weight,
+        })
+    };
+    if parallel {
+        keypoints.par_iter().filter_map(one).collect()
+    } else {
+        keypoints.iter().filter_map(one).collect()
+    }
+}
+
+/// Weighted linearised point-to-plane step about the weighted centroid (rotation scaled by the
+/// part radius for conditioning), applied exactly as a rotation and a translation.
+fn point_to_plane(matches: &[Match], radius_m: f64) -> Option<Isometry3<f64>> {
+    let total: f64 = matches.iter().map(|m| m.weight).sum();
+    let centre = matches
+        .iter()
+        .fold(Vector3::zeros(), |sum, m| sum + m.surface.coords * m.weight)
+        / total;
+    let scale = radius_m.max(1e-9);
+    let mut normal_matrix = Matrix6::zeros();
+    let mut rhs = Vector6::zeros();
+    for m in matches {
+        let lever = (m.surface.coords - centre).cross(&m.normal) / scale;
+        let row = Vector6::new(
+            lever.x, lever.y, lever.z, m.normal.x, m.normal.y, m.normal.z,
+        );
+        let residual = m.normal.dot(&(m.point - m.surface));
+        normal_matrix += row * row.transpose() * m.weight;
+        rhs += row * (residual * m.weight);
+    }
+    // A little damping keeps a sliding direction (a flat scan of one face) from blowing up.
+    let damping = normal_matrix.trace() * 1e-9;
+    for i in 0..6 {
+        normal_matrix[(i, i)] += damping;
+    }
+    let solution = normal_matrix.cholesky()?.solve(&rhs);
+    let omega = Vector3::new(solution[0], solution[1], solution[2]) / scale;
+    let translation = Vector3::new(solution[3], solution[4], solution[5]);
+    let rotation = UnitQuaternion::from_scaled_axis(omega);
+    let shift = centre + translation - rotation * centre;
+    Some(Isometry3::from_parts(Translation3::from(shift), rotation))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_schedules_run_from_delta0_to_delta_min_in_100_iterations() {
+        for schedule in [DeltaSchedule::Cosine, DeltaSchedule::CosineSquared] {
+            let options = PcaOptions {
+                schedule,
+                ..PcaOptions::default()
+            };
+            assert!((delta_at(0, 0.5, &options) - 0.5).abs() < 1e-15);
+            assert!((delta_at(100, 0.5, &options) - 0.01).abs() < 1e-15);
+            assert!((delta_at(250, 0.5, &options) - 0.01).abs() < 1e-15);
+        }
+        let cos = PcaOptions::default();
+        let squared = PcaOptions {
+            schedule: DeltaSchedule::CosineSquared,
+            ..PcaOptions::default()
+        };
+        assert!(delta_at(50, 0.5, &squared) < delta_at(50, 0.5, &cos));
+    }
+}
