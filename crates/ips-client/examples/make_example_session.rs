@@ -108,6 +108,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         folder.join("truth.json"),
         serde_json::to_string_pretty(&serde_json::json!({"base_from_part": pose(&truth)}))? + "\n",
     )?;
+    // A scan of the same cell: three scanner positions, the floor, a neighbouring box, 10%
+    // outliers and 0.3 mm noise, written in mm with 0.01 mm resolution.
+    let scan = align_core::trials::clouds::ScanOptions {
+        spacing_m: 0.008,
+        noise_sigma_m: 0.0003,
+        outlier_fraction: 0.1,
+        floor: true,
+        neighbour: true,
+        scanners: vec![
+            Point3::new(0.0, 0.0, 1.6),
+            Point3::new(1.6, -1.2, 1.0),
+            Point3::new(1.4, 0.9, 0.9),
+        ],
+        seed: 2024,
+    };
+    let cloud = align_core::trials::clouds::scan_part(&part.mesh, &truth, &scan);
+    let text: String = cloud
+        .iter()
+        .map(|p| format!("{:.2} {:.2} {:.2}\n", p.x * 1e3, p.y * 1e3, p.z * 1e3))
+        .collect();
+    std::fs::write(
+        folder.join("scan.xyz"),
+        format!("# x y z [mm], robot base frame\n{text}"),
+    )?;
     println!("wrote {}", folder.display());
     Ok(())
 }

@@ -33,6 +33,12 @@ pub enum Command {
     /// Point Set Alignment: move the session's part until it matches its inspections.
     #[command(after_help = "Example:\n  ips align examples/step_block_ur10/session.json --json")]
     Align(AlignArgs),
+    /// Point Cloud Alignment: move a part's mesh until it matches a scanner cloud.
+    #[command(
+        name = "align-cloud",
+        after_help = "Example:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json"
+    )]
+    AlignCloud(crate::align_cloud::AlignCloudArgs),
 }
 
 #[derive(Debug, Args)]
@@ -68,6 +74,10 @@ pub struct TrialsArgs {
     /// Seed of the displacement generator.
     #[arg(long, default_value_t = 2024)]
     pub seed: u64,
+    /// Point Cloud Alignment trials instead (a cluttered scan of the part: floor, a neighbouring
+    /// box, 10% outliers, 0.3 mm noise).
+    #[arg(long)]
+    pub pca: bool,
     /// Print one JSON document instead of Markdown tables.
     #[arg(long)]
     pub json: bool,

@@ -3,6 +3,7 @@
 //! codes (0 success, 2 bad input with a one-line reason on stderr).
 
 pub mod align;
+pub mod align_cloud;
 pub mod cli;
 pub mod fk;
 pub mod session;

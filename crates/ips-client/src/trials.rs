@@ -1,9 +1,11 @@
 //! `ips trials`: the thesis's AlignmentTests for Point Set Alignment, the thesis's method and ours
 //! side by side on the same seeded displacements.
 
+use align_core::registration::pca::{PcaOptions, PcaStep};
 use align_core::registration::psa::{PsaMethod, PsaOptions, Search};
+use align_core::trials::clouds::ScanOptions;
 use align_core::trials::parts::{TestPart, step_block};
-use align_core::trials::{TouchSetup, TrialRow, run_psa_trials};
+use align_core::trials::{TouchSetup, TrialRow, run_pca_trials, run_psa_trials};
 use serde::Serialize;
 
 use crate::BadInput;
@@ -73,6 +75,69 @@ struct Configuration {
     options: PsaOptions,
 }
 
+/// The scan PCA trials run on: the cell as a scanner sees it.
+pub fn trial_scan() -> ScanOptions {
+    ScanOptions {
+        spacing_m: 0.006,
+        noise_sigma_m: 0.0003,
+        outlier_fraction: 0.1,
+        floor: true,
+        neighbour: true,
+        scanners: vec![
+            nalgebra::Point3::new(0.0, 0.0, 1.6),
+            nalgebra::Point3::new(1.6, -1.2, 1.0),
+            nalgebra::Point3::new(1.4, 0.9, 0.9),
+        ],
+        seed: 7,
+    }
+}
+
+/// The thesis's PCA: SVD steps, voxel-centroid keypoints, no exploration.
+pub fn thesis_pca_options() -> PcaOptions {
+    PcaOptions {
+        step: PcaStep::PointToPoint,
+        voxel_centroids: true,
+        starts: 0,
+        ..PcaOptions::default()
+    }
+}
+
+fn run_pca(
+    args: &TrialsArgs,
+    part: &TestPart,
+    deltas_m: &[f64],
+    mut progress: impl FnMut(&str),
+) -> Vec<TrialTable> {
+    let scan = trial_scan();
+    [
+        ("thesis", thesis_pca_options()),
+        ("ours", PcaOptions::default()),
+    ]
+    .into_iter()
+    .map(|(method, options)| {
+        let rows = run_pca_trials(
+            part,
+            &scan,
+            &options,
+            deltas_m,
+            args.trials,
+            args.seed,
+            |delta_m, trial| {
+                if trial + 1 == args.trials {
+                    progress(&format!("PCA {method}: delta {:.0} mm done", delta_m * 1e3));
+                }
+            },
+        );
+        TrialTable {
+            touches: 0,
+            face_hints: false,
+            method: method.to_owned(),
+            rows: rows.iter().map(TrialRowJson::from).collect(),
+        }
+    })
+    .collect()
+}
+
 pub fn run(args: &TrialsArgs, mut progress: impl FnMut(&str)) -> Result<TrialsOutput, BadInput> {
     let deltas_mm = crate::parse_number_list(&args.deltas, "--deltas")?;
     if let Some(bad) = deltas_mm.iter().find(|d| **d <= 0.0) {
@@ -85,6 +150,14 @@ pub fn run(args: &TrialsArgs, mut progress: impl FnMut(&str)) -> Result<TrialsOu
         return Err(BadInput("--trials must be at least 1".to_owned()));
     }
     let part: TestPart = step_block().map_err(BadInput::new)?;
+    if args.pca {
+        return Ok(TrialsOutput {
+            part: part.name.clone(),
+            trials_per_delta: args.trials,
+            seed: args.seed,
+            tables: run_pca(args, &part, &deltas_m, progress),
+        });
+    }
     let touch_counts: Vec<usize> = match args.touches {
         Some(count) if (6..=part.touches.len()).contains(&count) => vec![count],
         Some(count) => {
@@ -164,8 +237,15 @@ impl TrialsOutput {
     /// Markdown: one table per touch count, the methods side by side per delta.
     pub fn to_markdown(&self) -> String {
         let mut text = format!(
-            "PSA trials on '{}', {} trials per delta, seed {} (success: final pose within 1 mm, thesis eq. 22)\n",
-            self.part, self.trials_per_delta, self.seed
+            "{} trials on '{}', {} trials per delta, seed {} (success: final pose within 1 mm, thesis eq. 22)\n",
+            if self.tables.iter().all(|t| t.touches == 0) {
+                "PCA"
+            } else {
+                "PSA"
+            },
+            self.part,
+            self.trials_per_delta,
+            self.seed
         );
         let mut counts: Vec<usize> = self.tables.iter().map(|t| t.touches).collect();
         counts.dedup();
@@ -175,7 +255,12 @@ impl TrialsOutput {
                 .iter()
                 .filter(|t| t.touches == touches)
                 .collect();
-            text += &format!("\n### {touches} touches\n\n| Delta (mm) |");
+            let title = if touches == 0 {
+                "Point Cloud Alignment".to_owned()
+            } else {
+                format!("{touches} touches")
+            };
+            text += &format!("\n### {title}\n\n| Delta (mm) |");
             for table in &tables {
                 text += &format!(
                     " {m}: succeed | {m}: fail | {m}: ambiguous | {m}: avg it. | {m}: avg error (mm) | {m}: avg time (s) |",

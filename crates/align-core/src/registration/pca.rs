@@ -17,7 +17,7 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
 use rayon::prelude::*;
 
-use super::convergence::StopCriterion;
+use super::convergence::{StopCriterion, pose_distance};
 use super::psa::spread_rotations;
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
@@ -236,9 +236,15 @@ fn run_schedule(
     let mut iterations = 0;
     let mut converged = false;
     let mut delta = delta0_m;
+    // Schedule position: normally the iteration count; it jumps to the end once the part has
+    // stopped moving, since the slow shrinking only exists to keep the part's points in the
+    // band while it still moves.
+    let mut schedule_position = 0;
+    let mut still = 0;
     while iterations < options.max_iterations {
-        delta = delta_at(iterations, delta0_m, options);
+        delta = delta_at(schedule_position, delta0_m, options);
         iterations += 1;
+        schedule_position += 1;
         let matches = correspond(
             mesh,
             keypoints,
@@ -262,10 +268,19 @@ fn run_schedule(
         let Some(step) = step else {
             break;
         };
+        let previous = pose;
         pose = step * pose;
-        if stop.update(&pose) {
+        if stop.update(&pose) && schedule_position >= options.schedule_iterations {
             converged = true;
             break;
+        }
+        still = if pose_distance(&previous, &pose, radius_m) <= options.tolerance_m {
+            still + 1
+        } else {
+            0
+        };
+        if still >= 3 {
+            schedule_position = schedule_position.max(options.schedule_iterations);
         }
     }
     ScheduleRun {
@@ -323,6 +338,9 @@ fn explore(
     let centre = mesh.centroid();
     let about_centre = Isometry3::translation(centre.x, centre.y, centre.z);
     let mut candidates = vec![*start];
+    // Only orientations within the rotation delta allows (with margin) are tried: scaling a
+    // spread set into that ball was tried and is worse, since the consensus score then prefers
+    // poses that rest a large face on the floor plane.
     for rotation in spread_rotations(options.starts) {
         if rotation.angle() <= max_angle {
             candidates.push(

@@ -44,6 +44,14 @@ fn run(command: Command) -> Result<String, BadInput> {
                 output.to_text()
             })
         }
+        Command::AlignCloud(args) => {
+            let output = ips_client::align_cloud::run(&args)?;
+            Ok(if args.json {
+                json_line(&output)?
+            } else {
+                output.to_text()
+            })
+        }
         Command::Trials(args) => {
             let output = ips_client::trials::run(&args, |line| eprintln!("{line}"))?;
             Ok(if args.json {
