@@ -123,8 +123,8 @@ pub fn run(args: &AlignCloudArgs) -> Result<AlignCloudOutput, BadInput> {
 
 impl AlignCloudOutput {
     pub fn to_text(&self) -> String {
-        let [x, y, z] = self.pose.xyz;
-        let [roll, pitch, yaw] = self.pose.rpy;
+        let [x, y, z] = self.pose.xyz.map(|v| crate::display_round(v, 6));
+        let [roll, pitch, yaw] = self.pose.rpy.map(|v| crate::display_round(v, 6));
         let mut text = format!(
             "base_from_part: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
         );

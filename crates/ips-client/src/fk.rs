@@ -51,8 +51,8 @@ impl FkOutput {
                 row[0], row[1], row[2], row[3]
             );
         }
-        let [x, y, z] = self.xyz;
-        let [roll, pitch, yaw] = self.rpy;
+        let [x, y, z] = self.xyz.map(|v| crate::display_round(v, 9));
+        let [roll, pitch, yaw] = self.rpy.map(|v| crate::display_round(v, 9));
         text += &format!("xyz [m]:   {x:.9} {y:.9} {z:.9}\n");
         text += &format!("rpy [rad]: {roll:.9} {pitch:.9} {yaw:.9}\n");
         text += &format!("joints:    {}\n", self.joints.join(", "));

@@ -37,3 +37,9 @@ pub fn parse_number_list(text: &str, what: &str) -> Result<Vec<f64>, BadInput> {
         })
         .collect()
 }
+
+/// Rounds for display so that -0.0000001 prints as 0.000000, not -0.000000.
+pub fn display_round(value: f64, decimals: i32) -> f64 {
+    let scale = 10f64.powi(decimals);
+    (value * scale).round() / scale + 0.0
+}

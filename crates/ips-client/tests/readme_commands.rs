@@ -59,5 +59,5 @@ fn readme_main_job_runs() {
         "README main job failed: {}",
         String::from_utf8_lossy(&output.stderr)
     );
-    assert!(String::from_utf8_lossy(&output.stdout).contains("base_from_tip"));
+    assert!(String::from_utf8_lossy(&output.stdout).contains("base_from_part"));
 }
