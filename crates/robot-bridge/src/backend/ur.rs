@@ -1,0 +1,280 @@
+//! Universal Robots back end: an RTDE client on TCP 30004. Negotiates protocol 2 (falling back
+//! to 1), reads the controller version, sets up the output recipe at the controller's maximum
+//! frequency (125 Hz on CB3, 500 Hz on e-Series), starts, and turns data packages into samples.
+//! Connection loss (EOF, an error, or 2 s of silence) is reported and retried with backoff.
+
+use std::io::Read;
+use std::net::{TcpStream, ToSocketAddrs};
+use std::time::{Duration, Instant};
+
+use ur_rtde::{
+    Package, RtdeError, ValueType, decode_values, package, parse_setup_reply, setup_outputs_request,
+};
+
+use super::{Backend, Event, Sample};
+
+const RECIPE: [&str; 7] = [
+    "timestamp",
+    "actual_q",
+    "actual_qd",
+    "actual_current",
+    "actual_TCP_pose",
+    "robot_mode",
+    "safety_mode",
+];
+
+/// Silence after which the controller counts as lost.
+pub const SILENCE_LIMIT: Duration = Duration::from_secs(2);
+
+pub struct UrBackend {
+    address: String,
+    connection: Option<Connection>,
+    backoff: Duration,
+    retry_at: Instant,
+    announced_connecting: bool,
+}
+
+struct Connection {
+    stream: TcpStream,
+    version: u16,
+    types: Vec<ValueType>,
+    last_data: Instant,
+    /// Bytes received but not yet a whole package: a read timeout may fall mid-package.
+    pending: Vec<u8>,
+}
+
+impl Connection {
+    /// The next whole package, reading for at most `timeout`; `Ok(None)` when none is complete.
+    fn poll_package(&mut self, timeout: Duration) -> std::io::Result<Option<Package>> {
+        loop {
+            if self.pending.len() >= 3 {
+                let size = u16::from_be_bytes([self.pending[0], self.pending[1]]) as usize;
+                if size < 3 {
+                    return Err(std::io::Error::other(format!(
+                        "package size {size} is smaller than its header"
+                    )));
+                }
+                if self.pending.len() >= size {
+                    let rest = self.pending.split_off(size);
+                    let whole = std::mem::replace(&mut self.pending, rest);
+                    return Ok(Some(Package::new(whole[2], whole[3..].to_vec())));
+                }
+            }
+            self.stream
+                .set_read_timeout(Some(timeout.max(Duration::from_millis(1))))?;
+            let mut buffer = [0u8; 4096];
+            match self.stream.read(&mut buffer) {
+                Ok(0) => {
+                    return Err(std::io::Error::new(
+                        std::io::ErrorKind::UnexpectedEof,
+                        "the controller closed the connection",
+                    ));
+                }
+                Ok(count) => self.pending.extend_from_slice(&buffer[..count]),
+                Err(error)
+                    if matches!(
+                        error.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) =>
+                {
+                    return Ok(None);
+                }
+                Err(error) => return Err(error),
+            }
+        }
+    }
+}
+
+impl std::fmt::Debug for UrBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("UrBackend")
+            .field("address", &self.address)
+            .finish()
+    }
+}
+
+impl UrBackend {
+    pub fn new(host: &str, port: u16) -> Self {
+        Self {
+            address: format!("{host}:{port}"),
+            connection: None,
+            backoff: Duration::from_millis(100),
+            retry_at: Instant::now(),
+            announced_connecting: false,
+        }
+    }
+
+    fn connect(&self) -> Result<(Connection, String), RtdeError> {
+        let address = self
+            .address
+            .to_socket_addrs()?
+            .next()
+            .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "no address"))?;
+        let mut stream = TcpStream::connect_timeout(&address, Duration::from_secs(2))?;
+        stream.set_nodelay(true)?;
+        stream.set_read_timeout(Some(SILENCE_LIMIT))?;
+        let mut version = 2;
+        Package::new(
+            package::REQUEST_PROTOCOL_VERSION,
+            2u16.to_be_bytes().to_vec(),
+        )
+        .write_to(&mut stream)?;
+        if read_reply(&mut stream, package::REQUEST_PROTOCOL_VERSION)?.first_byte()? != 1 {
+            version = 1;
+            Package::new(
+                package::REQUEST_PROTOCOL_VERSION,
+                1u16.to_be_bytes().to_vec(),
+            )
+            .write_to(&mut stream)?;
+            if read_reply(&mut stream, package::REQUEST_PROTOCOL_VERSION)?.first_byte()? != 1 {
+                return Err(std::io::Error::other(
+                    "the controller accepts neither RTDE protocol 2 nor 1",
+                )
+                .into());
+            }
+        }
+        Package::new(package::GET_URCONTROL_VERSION, Vec::new()).write_to(&mut stream)?;
+        let reply = read_reply(&mut stream, package::GET_URCONTROL_VERSION)?;
+        let parts: Vec<u32> = reply
+            .payload
+            .chunks_exact(4)
+            .map(|c| u32::from_be_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let major = parts.first().copied().unwrap_or(0);
+        // CB3 controllers (3.x) stream at most 125 Hz, e-Series (5.x) 500 Hz.
+        let frequency = if major >= 5 { 500.0 } else { 125.0 };
+        let setup = setup_outputs_request((version >= 2).then_some(frequency), &RECIPE);
+        setup.write_to(&mut stream)?;
+        let (recipe, types) = parse_setup_reply(
+            &read_reply(&mut stream, package::CONTROL_PACKAGE_SETUP_OUTPUTS)?,
+            version,
+        )?;
+        if let Some(missing) = types.iter().position(Option::is_none) {
+            return Err(std::io::Error::other(format!(
+                "the controller does not know output '{}' (NOT_FOUND)",
+                RECIPE[missing]
+            ))
+            .into());
+        }
+        if version >= 2 && recipe == 0 {
+            return Err(std::io::Error::other("the controller refused the output recipe").into());
+        }
+        Package::new(package::CONTROL_PACKAGE_START, Vec::new()).write_to(&mut stream)?;
+        if read_reply(&mut stream, package::CONTROL_PACKAGE_START)?.first_byte()? != 1 {
+            return Err(std::io::Error::other("the controller refused to start streaming").into());
+        }
+        let description = format!(
+            "RTDE v{version} to {} (controller {}), {frequency} Hz",
+            self.address,
+            parts
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(".")
+        );
+        Ok((
+            Connection {
+                stream,
+                version,
+                types: types.into_iter().flatten().collect(),
+                last_data: Instant::now(),
+                pending: Vec::new(),
+            },
+            description,
+        ))
+    }
+
+    fn lose(&mut self, reason: String) -> Event {
+        if let Some(connection) = self.connection.take() {
+            let _ = connection.stream.shutdown(std::net::Shutdown::Both);
+        }
+        self.retry_at = Instant::now() + self.backoff;
+        self.backoff = (self.backoff * 2).min(Duration::from_secs(2));
+        self.announced_connecting = false;
+        Event::Lost { reason }
+    }
+}
+
+/// Reads packages until one of `kind` arrives (text messages and stray data are skipped).
+fn read_reply(stream: &mut TcpStream, kind: u8) -> Result<Package, RtdeError> {
+    loop {
+        let package = Package::read_from(stream)?;
+        if package.kind == kind {
+            return Ok(package);
+        }
+    }
+}
+
+impl Backend for UrBackend {
+    fn joint_names(&self) -> Vec<String> {
+        [
+            "shoulder_pan_joint",
+            "shoulder_lift_joint",
+            "elbow_joint",
+            "wrist_1_joint",
+            "wrist_2_joint",
+            "wrist_3_joint",
+        ]
+        .map(str::to_owned)
+        .to_vec()
+    }
+
+    fn effort_unit(&self) -> Option<&'static str> {
+        Some("A")
+    }
+
+    fn next_event(&mut self, timeout: Duration) -> Option<Event> {
+        let Some(connection) = self.connection.as_mut() else {
+            let now = Instant::now();
+            if now < self.retry_at {
+                std::thread::sleep((self.retry_at - now).min(timeout));
+                return None;
+            }
+            if !self.announced_connecting {
+                self.announced_connecting = true;
+                return Some(Event::Connecting);
+            }
+            return match self.connect() {
+                Ok((connection, description)) => {
+                    self.connection = Some(connection);
+                    self.backoff = Duration::from_millis(100);
+                    Some(Event::Connected { description })
+                }
+                Err(error) => Some(self.lose(format!(
+                    "cannot connect to the controller at {}: {error}",
+                    self.address
+                ))),
+            };
+        };
+        match connection.poll_package(timeout) {
+            Ok(Some(package)) if package.kind == package::DATA_PACKAGE => {
+                connection.last_data = Instant::now();
+                let offset = usize::from(connection.version >= 2);
+                match decode_values(&package.payload, offset, &connection.types) {
+                    Ok(values) => Some(Event::Sample(Sample {
+                        controller_time: values[0][0],
+                        position: values[1].clone(),
+                        velocity: values[2].clone(),
+                        effort: Some(values[3].clone()),
+                        controller_seq: None,
+                        robot_mode: Some(values[5][0] as i32),
+                        safety_mode: Some(values[6][0] as i32),
+                    })),
+                    Err(error) => Some(self.lose(format!("malformed data package: {error}"))),
+                }
+            }
+            Ok(Some(_)) => None,
+            Ok(None) => {
+                if connection.last_data.elapsed() >= SILENCE_LIMIT {
+                    Some(self.lose(format!(
+                        "no data from the controller for {} s",
+                        SILENCE_LIMIT.as_secs()
+                    )))
+                } else {
+                    None
+                }
+            }
+            Err(error) => Some(self.lose(format!("controller connection lost: {error}"))),
+        }
+    }
+}

@@ -1,0 +1,323 @@
+//! sim-robot: stands in for a real cobot controller, speaking its wire protocol so that the
+//! bridge's real back-end code runs in every test.
+//!
+//! UR mode serves RTDE ([`rtde_server`]). The joints follow a scripted [`Motion`], a function of
+//! the controller clock, so every sample's ground truth can be recomputed exactly. A ZeroMQ REP
+//! control socket lets tests script the robot and read the truth:
+//!
+//! | request (JSON) | reply |
+//! | --- | --- |
+//! | `{"command":"status"}` | `{"ok":true,"time":s,"clients":n,"paused":b,"robot":"ur10"}` |
+//! | `{"command":"truth"}` | `{"ok":true,"time":s,"q":[...]}` (now) |
+//! | `{"command":"truth_at","time":s}` | `{"ok":true,"time":s,"q":[...],"qd":[...]}` |
+//! | `{"command":"motion","motion":{"kind":"hold","q":[...]}}` or `{"kind":"sine",...}` | `{"ok":true}` |
+//! | `{"command":"pause"}` / `{"command":"resume"}` | stop / restart sending data (connections stay) |
+//! | `{"command":"drop"}` | close every RTDE connection (clients may reconnect) |
+//!
+//! Errors reply `{"ok":false,"reason":"..."}`.
+//!
+//! The iiwa's FRI controller emulation is not built yet: `--robot iiwa14` is refused.
+
+pub mod motion;
+mod rtde_server;
+
+use std::net::TcpListener;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::{self, JoinHandle};
+use std::time::{Duration, Instant};
+
+use align_core::kinematics::Chain;
+use align_core::robots::ShippedRobot;
+pub use motion::Motion;
+use nalgebra::Isometry3;
+use serde_json::{Value, json};
+
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub robot: ShippedRobot,
+    /// RTDE listen address, e.g. "127.0.0.1:30004" ("127.0.0.1:0" picks a free port).
+    pub rtde_listen: String,
+    /// Control endpoint, e.g. "tcp://127.0.0.1:*".
+    pub control: String,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error("robot '{0}' is not simulated yet (FRI emulation for the iiwa is not built)")]
+    Unsupported(&'static str),
+    #[error("cannot listen for RTDE on {address}: {source}")]
+    Listen {
+        address: String,
+        source: std::io::Error,
+    },
+    #[error("control socket {endpoint}: {source}")]
+    Control {
+        endpoint: String,
+        source: zmq::Error,
+    },
+    #[error("robot model: {0}")]
+    Model(String),
+}
+
+/// One controller sample.
+pub(crate) struct Sample {
+    time_s: f64,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    tcp_pose: [f64; 6],
+}
+
+impl Sample {
+    /// The value of an RTDE output variable for this sample.
+    pub(crate) fn value(&self, name: &str) -> Vec<f64> {
+        match name {
+            "timestamp" => vec![self.time_s],
+            "actual_q" | "target_q" => self.q.clone(),
+            "actual_qd" | "target_qd" => self.qd.clone(),
+            "actual_TCP_pose" | "target_TCP_pose" => self.tcp_pose.to_vec(),
+            // RUNNING and NORMAL, as a healthy controller reports them.
+            "robot_mode" => vec![7.0],
+            "safety_mode" | "safety_status" => vec![1.0],
+            "runtime_state" => vec![2.0],
+            "speed_scaling" | "target_speed_fraction" => vec![1.0],
+            "joint_mode" => vec![253.0; 6],
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// State shared by the control socket and the protocol servers.
+pub(crate) struct Shared {
+    pub(crate) shutdown: AtomicBool,
+    pub(crate) paused: AtomicBool,
+    pub(crate) drop_generation: AtomicU64,
+    pub(crate) clients: AtomicUsize,
+    pub(crate) write_lock: Mutex<()>,
+    pub(crate) max_frequency_hz: f64,
+    pub(crate) controller_version: [u32; 4],
+    started: Instant,
+    motion: Mutex<Motion>,
+    chain: Chain,
+    limits: Vec<(f64, f64)>,
+}
+
+impl Shared {
+    fn now_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    fn sample_at(&self, time_s: f64) -> Sample {
+        let motion = self
+            .motion
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        let q = motion.position(time_s);
+        let qd = motion.velocity(time_s);
+        let pose: Isometry3<f64> = self.chain.forward_unchecked(&q);
+        let t = pose.translation.vector;
+        let r = pose.rotation.scaled_axis();
+        Sample {
+            time_s,
+            q,
+            qd,
+            tcp_pose: [t.x, t.y, t.z, r.x, r.y, r.z],
+        }
+    }
+
+    pub(crate) fn sample(&self) -> Sample {
+        self.sample_at(self.now_s())
+    }
+}
+
+/// A running simulator.
+#[derive(Debug)]
+pub struct SimHandle {
+    pub rtde_address: String,
+    pub control_endpoint: String,
+    shared: Arc<SharedDebug>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+/// Wrapper so the handle can derive Debug without exposing internals.
+struct SharedDebug(Arc<Shared>);
+
+impl std::fmt::Debug for SharedDebug {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Shared")
+    }
+}
+
+impl SimHandle {
+    /// Asks every thread to stop and waits for them.
+    pub fn stop(mut self) {
+        self.shared.0.shutdown.store(true, Ordering::Relaxed);
+        for thread in self.threads.drain(..) {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Drop for SimHandle {
+    fn drop(&mut self) {
+        self.shared.0.shutdown.store(true, Ordering::Relaxed);
+    }
+}
+
+/// A pose the arm can hold without reaching its limits: the UR "home" with the elbow up, the
+/// iiwa slightly bent.
+pub fn home(robot: ShippedRobot) -> Vec<f64> {
+    match robot {
+        ShippedRobot::Iiwa14 => vec![0.0, 0.5, 0.0, -1.2, 0.0, 0.9, 0.0],
+        _ => {
+            use std::f64::consts::FRAC_PI_2;
+            vec![0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0]
+        }
+    }
+}
+
+/// Starts the simulator's servers and returns their bound endpoints.
+pub fn start(config: &Config) -> Result<SimHandle, SimError> {
+    let (max_frequency_hz, controller_version) = match config.robot {
+        ShippedRobot::Ur10 => (125.0, [3, 15, 7, 106]),
+        ShippedRobot::Ur10e => (500.0, [5, 11, 6, 108]),
+        ShippedRobot::Iiwa14 => return Err(SimError::Unsupported("iiwa14")),
+    };
+    let chain = config
+        .robot
+        .chain()
+        .map_err(|e| SimError::Model(e.to_string()))?;
+    let limits = chain
+        .joints()
+        .iter()
+        .map(|j| (j.limits.lower, j.limits.upper))
+        .collect();
+    let shared = Arc::new(Shared {
+        shutdown: AtomicBool::new(false),
+        paused: AtomicBool::new(false),
+        drop_generation: AtomicU64::new(0),
+        clients: AtomicUsize::new(0),
+        write_lock: Mutex::new(()),
+        max_frequency_hz,
+        controller_version,
+        started: Instant::now(),
+        motion: Mutex::new(Motion::Hold {
+            q: home(config.robot),
+        }),
+        chain,
+        limits,
+    });
+    let listener = TcpListener::bind(&config.rtde_listen).map_err(|source| SimError::Listen {
+        address: config.rtde_listen.clone(),
+        source,
+    })?;
+    let rtde_address = listener
+        .local_addr()
+        .map(|a| a.to_string())
+        .unwrap_or_else(|_| config.rtde_listen.clone());
+    let context = zmq::Context::new();
+    let control_error = |source| SimError::Control {
+        endpoint: config.control.clone(),
+        source,
+    };
+    let control = context.socket(zmq::REP).map_err(control_error)?;
+    control.set_linger(0).map_err(control_error)?;
+    control.set_rcvtimeo(100).map_err(control_error)?;
+    control.bind(&config.control).map_err(control_error)?;
+    let control_endpoint = control
+        .get_last_endpoint()
+        .map_err(control_error)?
+        .unwrap_or_else(|_| config.control.clone());
+    let mut threads = Vec::new();
+    {
+        let shared = Arc::clone(&shared);
+        threads.push(thread::spawn(move || rtde_server::serve(listener, shared)));
+    }
+    {
+        let shared = Arc::clone(&shared);
+        let robot = config.robot;
+        threads.push(thread::spawn(move || control_loop(control, shared, robot)));
+    }
+    Ok(SimHandle {
+        rtde_address,
+        control_endpoint,
+        shared: Arc::new(SharedDebug(shared)),
+        threads,
+    })
+}
+
+fn control_loop(socket: zmq::Socket, shared: Arc<Shared>, robot: ShippedRobot) {
+    while !shared.shutdown.load(Ordering::Relaxed) {
+        let request = match socket.recv_bytes(0) {
+            Ok(request) => request,
+            Err(zmq::Error::EAGAIN) => continue,
+            Err(_) => break,
+        };
+        let reply = handle_control(&request, &shared, robot);
+        if socket.send(reply.to_string().as_bytes(), 0).is_err() {
+            break;
+        }
+    }
+}
+
+fn failure(reason: impl Into<String>) -> Value {
+    json!({"ok": false, "reason": reason.into()})
+}
+
+fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value {
+    let Ok(request) = serde_json::from_slice::<Value>(request) else {
+        return failure("the request is not JSON");
+    };
+    match request["command"].as_str() {
+        Some("status") => json!({
+            "ok": true,
+            "time": shared.now_s(),
+            "clients": shared.clients.load(Ordering::Relaxed),
+            "paused": shared.paused.load(Ordering::Relaxed),
+            "robot": robot.name(),
+        }),
+        Some("truth") => {
+            let sample = shared.sample();
+            json!({"ok": true, "time": sample.time_s, "q": sample.q, "qd": sample.qd})
+        }
+        Some("truth_at") => match request["time"].as_f64() {
+            Some(time) if time.is_finite() => {
+                let sample = shared.sample_at(time);
+                json!({"ok": true, "time": time, "q": sample.q, "qd": sample.qd})
+            }
+            _ => failure("truth_at needs a finite 'time' in s"),
+        },
+        Some("motion") => match serde_json::from_value::<Motion>(request["motion"].clone()) {
+            Ok(motion) => match motion.check(&shared.limits) {
+                Ok(()) => {
+                    *shared.motion.lock().unwrap_or_else(|p| p.into_inner()) = motion;
+                    json!({"ok": true})
+                }
+                Err(reason) => failure(reason),
+            },
+            Err(error) => failure(format!("bad motion: {error}")),
+        },
+        Some("pause") => {
+            shared.paused.store(true, Ordering::Relaxed);
+            json!({"ok": true})
+        }
+        Some("resume") => {
+            shared.paused.store(false, Ordering::Relaxed);
+            json!({"ok": true})
+        }
+        Some("drop") => {
+            shared.drop_generation.fetch_add(1, Ordering::Relaxed);
+            json!({"ok": true})
+        }
+        Some(other) => failure(format!("unknown command '{other}'")),
+        None => failure("the request has no 'command'"),
+    }
+}
+
+/// Blocks until `flag` is set (by the binary's signal handlers).
+pub fn wait_for_shutdown(flag: &AtomicBool) {
+    while !flag.load(Ordering::Relaxed) {
+        thread::sleep(Duration::from_millis(50));
+    }
+}
