@@ -1,0 +1,153 @@
+//! The shipped binaries as a user runs them: sim-robot and robot-bridge spawned on free ports,
+//! READY lines read back, a third-party client (pyzmq, in the venv `scripts/python-env.sh`
+//! makes) mirroring joint states with the thesis's messages, clean exit on SIGTERM, and flags
+//! refused with exit code 2.
+
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+use system_tests::{binary, spawn};
+
+fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// `cargo test -p system-tests` alone does not build other packages' binaries: build them.
+fn ensure_binaries() {
+    if binary("sim-robot").exists() && binary("robot-bridge").exists() {
+        return;
+    }
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    let status = Command::new(cargo)
+        .args(["build", "-p", "sim-robot", "-p", "robot-bridge"])
+        .current_dir(repo_root())
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+fn python() -> PathBuf {
+    let status = Command::new("bash")
+        .arg(repo_root().join("scripts/python-env.sh"))
+        .status()
+        .expect("bash runs scripts/python-env.sh");
+    assert!(status.success(), "scripts/python-env.sh failed");
+    repo_root().join(".venv/bin/python")
+}
+
+#[test]
+fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
+    ensure_binaries();
+    let sim = spawn(
+        binary("sim-robot"),
+        &[
+            "--robot",
+            "ur10",
+            "--rtde-host",
+            "127.0.0.1",
+            "--rtde-port",
+            "0",
+            "--control",
+            "tcp://127.0.0.1:*",
+        ],
+        Duration::from_secs(20),
+    );
+    let port = sim.endpoint("rtde").rsplit(':').next().unwrap().to_owned();
+    let bridge = spawn(
+        binary("robot-bridge"),
+        &[
+            "--backend",
+            "ur",
+            "--robot-host",
+            "127.0.0.1",
+            "--rtde-port",
+            &port,
+            "--rep",
+            "tcp://127.0.0.1:*",
+            "--pub",
+            "tcp://127.0.0.1:*",
+        ],
+        Duration::from_secs(20),
+    );
+    let output = Command::new(python())
+        .arg(repo_root().join("examples/python/mirror_joint_states.py"))
+        .args([
+            "--rep",
+            bridge.endpoint("rep"),
+            "--pub",
+            bridge.endpoint("pub"),
+            "--count",
+            "25",
+            "--json",
+            "--timeout-ms",
+            "10000",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let lines: Vec<serde_json::Value> = String::from_utf8(output.stdout)
+        .unwrap()
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 25);
+    assert!(
+        lines
+            .windows(2)
+            .all(|w| w[1]["seq"].as_u64() == w[0]["seq"].as_u64().map(|s| s + 1))
+    );
+    assert_eq!(lines[0]["position"].as_array().unwrap().len(), 6);
+
+    for service in [bridge, sim] {
+        let status = service
+            .terminate(Duration::from_secs(10))
+            .expect("exits within 10 s of SIGTERM");
+        assert!(status.success(), "{status:?}");
+    }
+}
+
+#[test]
+fn bad_flags_exit_2_with_a_reason() {
+    ensure_binaries();
+    let cases: [(&str, &[&str], &str); 4] = [
+        (
+            "robot-bridge",
+            &["--backend", "abb", "--robot-host", "x"],
+            "unknown back end 'abb'",
+        ),
+        (
+            "robot-bridge",
+            &[
+                "--backend",
+                "iiwa",
+                "--robot-host",
+                "127.0.0.1",
+                "--rep",
+                "tcp://127.0.0.1:*",
+                "--pub",
+                "tcp://127.0.0.1:*",
+            ],
+            "iiwa (FRI) back end is not built yet",
+        ),
+        ("sim-robot", &["--robot", "kr16"], "unknown robot 'kr16'"),
+        (
+            "sim-robot",
+            &["--robot", "iiwa14", "--control", "tcp://127.0.0.1:*"],
+            "not simulated yet",
+        ),
+    ];
+    for (program, args, reason) in cases {
+        let output = Command::new(binary(program)).args(args).output().unwrap();
+        assert_eq!(output.status.code(), Some(2), "{program} {args:?}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(reason), "{program}: {stderr}");
+    }
+}
