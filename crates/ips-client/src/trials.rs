@@ -184,6 +184,15 @@ pub fn run(args: &TrialsArgs, mut progress: impl FnMut(&str)) -> Result<TrialsOu
         });
         configurations.push(Configuration {
             touches,
+            face_hints: false,
+            method: "ours-no-coherence",
+            options: PsaOptions {
+                coherence: false,
+                ..our_options()
+            },
+        });
+        configurations.push(Configuration {
+            touches,
             face_hints: true,
             method: "ours+face-hints",
             options: our_options(),

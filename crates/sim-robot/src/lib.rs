@@ -136,6 +136,8 @@ impl Shared {
 pub struct SimHandle {
     pub rtde_address: String,
     pub control_endpoint: String,
+    /// Wall-clock time of controller time zero, s since the Unix epoch (for latency figures).
+    pub clock_origin_unix_s: f64,
     shared: Arc<SharedDebug>,
     threads: Vec<JoinHandle<()>>,
 }
@@ -239,9 +241,14 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         let robot = config.robot;
         threads.push(thread::spawn(move || control_loop(control, shared, robot)));
     }
+    let clock_origin_unix_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+        - shared.started.elapsed().as_secs_f64();
     Ok(SimHandle {
         rtde_address,
         control_endpoint,
+        clock_origin_unix_s,
         shared: Arc::new(SharedDebug(shared)),
         threads,
     })

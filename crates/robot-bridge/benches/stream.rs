@@ -1,0 +1,165 @@
+//! Streaming benchmark: sim-robot (UR10e, 500 Hz RTDE) -> robot-bridge -> 4 subscribers, all in
+//! this process on loopback. Prints a table: achieved rate, sequence gaps, latency from the
+//! controller's sample time to each subscriber's receipt, CPU of the whole process, and the
+//! instruction round trip.
+//!
+//!     cargo bench -p robot-bridge --bench stream -- [SECONDS]     (default 10)
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use align_core::robots::ShippedRobot;
+use robot_bridge::{BackendKind, Config};
+
+const STATUS: &str = r#"{"header":{"from":"ips","to":"ros","type":"instruction"},"body":{"command":"status","content":"bridge"}}"#;
+const START: &str = r#"{"header":{"from":"ips","to":"ros","type":"instruction"},"body":{"command":"start","content":"hwState"}}"#;
+
+fn unix_now() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+/// User + system CPU seconds of this process, from /proc/self/stat.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let fields: Vec<&str> = stat
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = fields.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0)
+        + fields.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    ticks / 100.0
+}
+
+fn socket(context: &zmq::Context, kind: zmq::SocketType, endpoint: &str) -> zmq::Socket {
+    let socket = context.socket(kind).expect("socket");
+    socket.set_linger(0).expect("linger");
+    socket.set_rcvtimeo(2000).expect("timeout");
+    socket.connect(endpoint).expect("connect");
+    socket
+}
+
+fn main() {
+    let seconds: f64 = std::env::args()
+        .filter_map(|a| a.parse().ok())
+        .next()
+        .unwrap_or(10.0);
+    let sim = sim_robot::start(&sim_robot::Config {
+        robot: ShippedRobot::Ur10e,
+        rtde_listen: "127.0.0.1:0".to_owned(),
+        control: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .expect("sim-robot");
+    let port: u16 = sim
+        .rtde_address
+        .rsplit(':')
+        .next()
+        .and_then(|p| p.parse().ok())
+        .expect("port");
+    let bridge = robot_bridge::start(&Config {
+        backend: BackendKind::Ur,
+        robot_host: "127.0.0.1".to_owned(),
+        rtde_port: port,
+        fri_port: 30200,
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        publish: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .expect("robot-bridge");
+    let context = zmq::Context::new();
+    let rep = socket(&context, zmq::REQ, &bridge.rep_endpoint);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        rep.send(STATUS, 0).expect("send");
+        let reply = rep.recv_string(0).expect("reply").unwrap_or_default();
+        if reply.contains("\"connected\"") || Instant::now() > deadline {
+            break;
+        }
+        thread::sleep(Duration::from_millis(20));
+    }
+    let origin = sim.clock_origin_unix_s;
+    let stop = Arc::new(AtomicBool::new(false));
+    let subscribers: Vec<_> = (0..4)
+        .map(|_| {
+            let sub = socket(&context, zmq::SUB, &bridge.pub_endpoint);
+            sub.set_subscribe(b"").expect("subscribe");
+            let stop = Arc::clone(&stop);
+            thread::spawn(move || {
+                let (mut latencies, mut gaps, mut count, mut last_seq) =
+                    (Vec::new(), 0u64, 0u64, None::<u64>);
+                while !stop.load(Ordering::Relaxed) {
+                    let Ok(bytes) = sub.recv_bytes(0) else {
+                        continue;
+                    };
+                    let received = unix_now();
+                    let Ok(value) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+                        continue;
+                    };
+                    let body = &value["body"];
+                    let seq = body["seq"].as_u64().unwrap_or(0);
+                    if let Some(last) = last_seq {
+                        gaps += seq.saturating_sub(last + 1);
+                    }
+                    last_seq = Some(seq);
+                    count += 1;
+                    latencies.push(
+                        received - (origin + body["controller_time"].as_f64().unwrap_or(0.0)),
+                    );
+                }
+                (latencies, gaps, count)
+            })
+        })
+        .collect();
+    thread::sleep(Duration::from_millis(300));
+    rep.send(START, 0).expect("send");
+    let _ = rep.recv_string(0);
+    let cpu_before = cpu_seconds();
+    let started = Instant::now();
+    thread::sleep(Duration::from_secs_f64(seconds));
+    let elapsed = started.elapsed().as_secs_f64();
+    let cpu = cpu_seconds() - cpu_before;
+    let mut round_trips = Vec::new();
+    for _ in 0..1000 {
+        let sent = Instant::now();
+        rep.send(STATUS, 0).expect("send");
+        let _ = rep.recv_bytes(0);
+        round_trips.push(sent.elapsed().as_secs_f64());
+    }
+    stop.store(true, Ordering::Relaxed);
+    println!(
+        "| subscriber | messages | rate (Hz) | seq gaps | latency p50 (ms) | p99 (ms) | max (ms) |"
+    );
+    println!("|---:|---:|---:|---:|---:|---:|---:|");
+    for (index, handle) in subscribers.into_iter().enumerate() {
+        let (mut latencies, gaps, count) = handle.join().expect("subscriber");
+        latencies.sort_by(f64::total_cmp);
+        println!(
+            "| {} | {count} | {:.1} | {gaps} | {:.3} | {:.3} | {:.3} |",
+            index + 1,
+            count as f64 / elapsed,
+            percentile(&latencies, 0.5) * 1e3,
+            percentile(&latencies, 0.99) * 1e3,
+            latencies.last().copied().unwrap_or(f64::NAN) * 1e3
+        );
+    }
+    round_trips.sort_by(f64::total_cmp);
+    println!(
+        "\n{seconds} s at 500 Hz (UR10e); process CPU (sim + bridge + 4 subscribers): {:.1}% of one core; instruction round trip p50 {:.3} ms, p99 {:.3} ms",
+        cpu / elapsed * 100.0,
+        percentile(&round_trips, 0.5) * 1e3,
+        percentile(&round_trips, 0.99) * 1e3
+    );
+    bridge.stop();
+    sim.stop();
+}
