@@ -320,3 +320,71 @@ impl HwStateBody {
         Ok(())
     }
 }
+
+/// A request to the alignment service (`ips serve`, REP, default `tcp://*:4000`), in the
+/// thesis's envelope with `"type": "request"`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ServiceRequestBody {
+    /// status, start, stop, get, list, remove, reset, align, save.
+    pub command: String,
+    /// Inspection ids (remove).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ids: Vec<String>,
+    /// A file (save).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path: Option<String>,
+}
+
+/// The service's reply, `"type": "reply"`: `ok`, a `reason` when not, and the command's data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ServiceReplyBody {
+    pub ok: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
+    pub data: serde_json::Value,
+}
+
+pub type ServiceRequest = Envelope<ServiceRequestBody>;
+pub type ServiceReply = Envelope<ServiceReplyBody>;
+
+/// Name of the alignment service in headers.
+pub const SERVICE: &str = "align";
+
+pub fn service_request(command: &str) -> ServiceRequest {
+    Envelope {
+        header: Header {
+            from: IPS.to_owned(),
+            to: SERVICE.to_owned(),
+            kind: "request".to_owned(),
+        },
+        body: ServiceRequestBody {
+            command: command.to_owned(),
+            ids: Vec::new(),
+            path: None,
+        },
+    }
+}
+
+pub fn service_reply(ok: bool, reason: Option<String>, data: serde_json::Value) -> ServiceReply {
+    Envelope {
+        header: Header {
+            from: SERVICE.to_owned(),
+            to: IPS.to_owned(),
+            kind: "reply".to_owned(),
+        },
+        body: ServiceReplyBody { ok, reason, data },
+    }
+}
+
+impl Message for ServiceReply {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        Ok(())
+    }
+}
+
+impl Message for ServiceRequest {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        Ok(())
+    }
+}

@@ -73,6 +73,7 @@ fn golden_files_round_trip_and_validate_against_their_schemas() {
     let instruction_schema = schema("instruction.schema.json");
     let hw_state_schema = schema("hw_state.schema.json");
     let status_schema = schema("status.schema.json");
+    let service_schema = schema("service.schema.json");
     let mut checked = 0;
     for entry in std::fs::read_dir(root().join("examples")).unwrap() {
         let path = entry.unwrap().path();
@@ -91,6 +92,14 @@ fn golden_files_round_trip_and_validate_against_their_schemas() {
             "status" => (
                 &status_schema,
                 to_json(&serde_json::from_str::<Status>(&text).unwrap()).unwrap(),
+            ),
+            "request" => (
+                &service_schema,
+                to_json(&serde_json::from_str::<protocol::ServiceRequest>(&text).unwrap()).unwrap(),
+            ),
+            "reply" => (
+                &service_schema,
+                to_json(&serde_json::from_str::<protocol::ServiceReply>(&text).unwrap()).unwrap(),
             ),
             other => panic!("{name}: unknown type {other}"),
         };

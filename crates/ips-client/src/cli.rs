@@ -39,6 +39,65 @@ pub enum Command {
         after_help = "Example:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json"
     )]
     AlignCloud(crate::align_cloud::AlignCloudArgs),
+    /// The alignment service: mirrors the robot through robot-bridge, captures inspections,
+    /// journals them, aligns on request (REP socket, thesis envelope).
+    Serve(ServeArgs),
+    /// Ask the service to start mirroring the robot (inspection mode).
+    Start(ServiceArgs),
+    /// Ask the service to stop mirroring.
+    Stop(ServiceArgs),
+    /// Capture the robot's current pose as an inspection.
+    Get(ServiceArgs),
+    /// List the inspections taken.
+    List(ServiceArgs),
+    /// Remove inspections by id.
+    Remove(RemoveArgs),
+    /// Remove every inspection.
+    Reset(ServiceArgs),
+    /// The service's state: mirroring, inspections, age of the latest joint state.
+    Status(ServiceArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Session file naming robot, tool and part (its inspections start the list when no
+    /// journal exists yet).
+    #[arg(long, value_name = "FILE")]
+    pub session: PathBuf,
+    /// Journal of inspections (appended and flushed before every acknowledgement).
+    #[arg(long, value_name = "FILE", default_value = "inspections.journal")]
+    pub journal: PathBuf,
+    #[arg(long, default_value = "tcp://*:4000")]
+    pub rep: String,
+    #[arg(long, default_value = "tcp://127.0.0.1:2000")]
+    pub bridge_rep: String,
+    #[arg(long, default_value = "tcp://127.0.0.1:3000")]
+    pub bridge_pub: String,
+    /// Oldest joint state a `get` accepts, s.
+    #[arg(long, default_value_t = 0.1)]
+    pub max_sample_age: f64,
+    /// Fastest tool a `get` accepts, m/s.
+    #[arg(long, default_value_t = 0.005)]
+    pub max_tool_speed: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct ServiceArgs {
+    /// The service's REP endpoint.
+    #[arg(long, default_value = "tcp://127.0.0.1:4000")]
+    pub service: String,
+    /// Print the reply's JSON document.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct RemoveArgs {
+    /// Inspection ids.
+    #[arg(required = true)]
+    pub ids: Vec<String>,
+    #[command(flatten)]
+    pub service: ServiceArgs,
 }
 
 #[derive(Debug, Args)]

@@ -5,7 +5,9 @@
 pub mod align;
 pub mod align_cloud;
 pub mod cli;
+pub mod client;
 pub mod fk;
+pub mod serve;
 pub mod session;
 pub mod trials;
 

@@ -52,6 +52,16 @@ fn run(command: Command) -> Result<String, BadInput> {
                 output.to_text()
             })
         }
+        Command::Serve(args) => serve(&args),
+        Command::Start(args) => ips_client::client::call("start", Vec::new(), &args),
+        Command::Stop(args) => ips_client::client::call("stop", Vec::new(), &args),
+        Command::Get(args) => ips_client::client::call("get", Vec::new(), &args),
+        Command::List(args) => ips_client::client::call("list", Vec::new(), &args),
+        Command::Reset(args) => ips_client::client::call("reset", Vec::new(), &args),
+        Command::Status(args) => ips_client::client::call("status", Vec::new(), &args),
+        Command::Remove(args) => {
+            ips_client::client::call("remove", args.ids.clone(), &args.service)
+        }
         Command::Trials(args) => {
             let output = ips_client::trials::run(&args, |line| eprintln!("{line}"))?;
             Ok(if args.json {
@@ -61,6 +71,32 @@ fn run(command: Command) -> Result<String, BadInput> {
             })
         }
     }
+}
+
+fn serve(args: &ips_client::cli::ServeArgs) -> Result<String, BadInput> {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let config = ips_client::serve::ServeConfig {
+        session: args.session.clone(),
+        journal: args.journal.clone(),
+        rep: args.rep.clone(),
+        bridge_rep: args.bridge_rep.clone(),
+        bridge_pub: args.bridge_pub.clone(),
+        max_sample_age_s: args.max_sample_age,
+        max_tool_speed_m_s: args.max_tool_speed,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .map_err(|error| BadInput(format!("cannot handle signals: {error}")))?;
+    }
+    let handle = ips_client::serve::start(&config).map_err(BadInput)?;
+    println!("READY rep={}", handle.rep_endpoint);
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    handle.stop();
+    Ok(String::new())
 }
 
 fn json_line(value: &impl serde::Serialize) -> Result<String, BadInput> {

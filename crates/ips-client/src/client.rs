@@ -1,0 +1,65 @@
+//! `ips start|stop|get|list|remove|reset|status`: one request to a running `ips serve`.
+
+use serde_json::Value;
+
+use crate::BadInput;
+use crate::cli::ServiceArgs;
+
+/// Sends one request and returns the reply for printing (text or `--json`); a refused request
+/// is bad input (exit 2) with the service's reason.
+pub fn call(command: &str, ids: Vec<String>, args: &ServiceArgs) -> Result<String, BadInput> {
+    let context = zmq::Context::new();
+    let socket = context.socket(zmq::REQ).map_err(BadInput::new)?;
+    socket.set_linger(0).map_err(BadInput::new)?;
+    socket.set_rcvtimeo(30_000).map_err(BadInput::new)?;
+    socket.set_sndtimeo(5_000).map_err(BadInput::new)?;
+    socket
+        .connect(&args.service)
+        .map_err(|error| BadInput(format!("{}: {error}", args.service)))?;
+    let mut request = protocol::service_request(command);
+    request.body.ids = ids;
+    let text = protocol::to_json(&request).map_err(BadInput::new)?;
+    socket.send(text.as_bytes(), 0).map_err(BadInput::new)?;
+    let reply = socket.recv_bytes(0).map_err(|_| {
+        BadInput(format!(
+            "no reply from the service at {} within 30 s",
+            args.service
+        ))
+    })?;
+    let reply: protocol::ServiceReply = serde_json::from_slice(&reply)
+        .map_err(|error| BadInput(format!("bad reply from the service: {error}")))?;
+    if !reply.body.ok {
+        return Err(BadInput(
+            reply.body.reason.unwrap_or_else(|| "refused".to_owned()),
+        ));
+    }
+    Ok(if args.json {
+        format!(
+            "{}\n",
+            serde_json::to_string(&reply.body.data).unwrap_or_default()
+        )
+    } else {
+        text_of(command, &reply.body.data)
+    })
+}
+
+fn text_of(command: &str, data: &Value) -> String {
+    match command {
+        "get" => format!("inspection {} at q = {}\n", data["id"], data["q"]),
+        "list" => {
+            let mut text = String::new();
+            for inspection in data["inspections"].as_array().into_iter().flatten() {
+                text += &format!(
+                    "{:>6}  q = {}\n",
+                    inspection["id"].as_str().unwrap_or("?"),
+                    inspection["q"]
+                );
+            }
+            if text.is_empty() {
+                text = "no inspections\n".to_owned();
+            }
+            text
+        }
+        _ => format!("{data}\n"),
+    }
+}

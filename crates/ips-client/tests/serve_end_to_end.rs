@@ -1,0 +1,228 @@
+//! `ips serve` over real sockets with sim-robot and robot-bridge: inspections captured from the
+//! live stream, journaled, restored after a restart, aligned to the hidden truth; stale data and
+//! bad requests refused with reasons.
+
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use align_core::robots::ShippedRobot;
+use ips_client::serve::{ServeConfig, ServeHandle};
+use serde_json::{Value, json};
+
+fn example(file: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/step_block_ur10")
+        .join(file)
+}
+
+fn req(context: &zmq::Context, endpoint: &str) -> zmq::Socket {
+    let socket = context.socket(zmq::REQ).unwrap();
+    socket.set_linger(0).unwrap();
+    socket.set_rcvtimeo(10_000).unwrap();
+    socket.connect(endpoint).unwrap();
+    socket
+}
+
+fn call(socket: &zmq::Socket, body: Value) -> Value {
+    let request =
+        json!({"header": {"from": "ips", "to": "align", "type": "request"}, "body": body});
+    socket.send(request.to_string().as_bytes(), 0).unwrap();
+    let reply: Value = serde_json::from_slice(&socket.recv_bytes(0).unwrap()).unwrap();
+    assert_eq!(reply["header"]["type"], "reply");
+    reply["body"].clone()
+}
+
+fn serve(config: &ServeConfig) -> ServeHandle {
+    ips_client::serve::start(config).unwrap()
+}
+
+#[test]
+fn inspections_are_captured_journaled_restored_and_aligned() {
+    let sim = sim_robot::start(&sim_robot::Config {
+        robot: ShippedRobot::Ur10,
+        rtde_listen: "127.0.0.1:0".to_owned(),
+        control: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .unwrap();
+    let port: u16 = sim
+        .rtde_address
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let bridge = robot_bridge::start(&robot_bridge::Config {
+        backend: robot_bridge::BackendKind::Ur,
+        robot_host: "127.0.0.1".to_owned(),
+        rtde_port: port,
+        fri_port: 30200,
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        publish: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .unwrap();
+    // The example session without its inspections, paths made absolute.
+    let mut template: Value =
+        serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
+    let planned: Vec<Vec<f64>> = template["inspections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| {
+            i["q"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        })
+        .collect();
+    template["inspections"] = json!([]);
+    template["robot"]["urdf"] = json!(example("../../robots/ur10.urdf").to_str().unwrap());
+    template["part"]["mesh"] = json!(example("step_block.stl").to_str().unwrap());
+    let folder = std::env::temp_dir().join(format!("cobot-align-serve-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&folder);
+    std::fs::create_dir_all(&folder).unwrap();
+    std::fs::write(folder.join("template.json"), template.to_string()).unwrap();
+    let config = ServeConfig {
+        session: folder.join("template.json"),
+        journal: folder.join("inspections.journal"),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        bridge_rep: bridge.rep_endpoint.clone(),
+        bridge_pub: bridge.pub_endpoint.clone(),
+        max_sample_age_s: 0.1,
+        max_tool_speed_m_s: 0.005,
+    };
+    let service = serve(&config);
+    let context = zmq::Context::new();
+    let client = req(&context, &service.rep_endpoint);
+    let control = req(&context, &sim.control_endpoint);
+    let sub = context.socket(zmq::SUB).unwrap();
+    sub.set_linger(0).unwrap();
+    sub.set_rcvtimeo(5000).unwrap();
+    sub.set_subscribe(b"").unwrap();
+    sub.connect(&bridge.pub_endpoint).unwrap();
+
+    // Before mirroring there is no live data: get is refused with the reason.
+    let refused = call(&client, json!({"command": "get"}));
+    assert_eq!(refused["ok"], false);
+    assert!(
+        refused["reason"]
+            .as_str()
+            .unwrap()
+            .contains("start mirroring first"),
+        "{refused}"
+    );
+
+    // The bridge may still be connecting to the controller: start succeeds once it is.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let started = call(&client, json!({"command": "start"}));
+        if started["ok"] == true {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{started}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    for q in &planned {
+        control
+            .send(
+                json!({"command": "motion", "motion": {"kind": "hold", "q": q}})
+                    .to_string()
+                    .as_bytes(),
+                0,
+            )
+            .unwrap();
+        let _ = control.recv_bytes(0).unwrap();
+        // Wait for the stream to show the new pose, then two more samples: the service's own
+        // subscription has seen it by then.
+        let mut after = None;
+        while after.is_none_or(|n: i32| n < 2) {
+            let state: Value = serde_json::from_slice(&sub.recv_bytes(0).unwrap()).unwrap();
+            let at_pose = state["body"]["position"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .zip(q)
+                .all(|(a, b)| (a.as_f64().unwrap() - b).abs() < 1e-12);
+            after = match (after, at_pose) {
+                (None, true) => Some(0),
+                (Some(n), _) => Some(n + 1),
+                (None, false) => None,
+            };
+        }
+        let got = call(&client, json!({"command": "get"}));
+        assert_eq!(got["ok"], true, "{got}");
+    }
+    let listed = call(&client, json!({"command": "list"}));
+    assert_eq!(listed["data"]["inspections"].as_array().unwrap().len(), 9);
+
+    // A restart replays the journal: every acknowledged inspection is back.
+    service.stop();
+    let service = serve(&config);
+    let client = req(&context, &service.rep_endpoint);
+    let listed = call(&client, json!({"command": "list"}));
+    assert_eq!(listed["data"]["inspections"].as_array().unwrap().len(), 9);
+
+    let aligned = call(&client, json!({"command": "align"}));
+    assert_eq!(aligned["ok"], true, "{aligned}");
+    let truth: Value =
+        serde_json::from_str(&std::fs::read_to_string(example("truth.json")).unwrap()).unwrap();
+    for axis in 0..3 {
+        let got = aligned["data"]["pose"]["xyz"][axis].as_f64().unwrap();
+        let want = truth["base_from_part"]["xyz"][axis].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "xyz[{axis}]: {got} vs {want}");
+    }
+
+    // Remove and bad requests.
+    let removed = call(&client, json!({"command": "remove", "ids": ["9"]}));
+    assert_eq!(removed["data"]["inspections"], 8);
+    let unknown = call(&client, json!({"command": "remove", "ids": ["77"]}));
+    assert!(
+        unknown["reason"].as_str().unwrap().contains("unknown"),
+        "{unknown}"
+    );
+    let bad = call(&client, json!({"command": "fly"}));
+    assert!(
+        bad["reason"]
+            .as_str()
+            .unwrap()
+            .starts_with("unknown command 'fly'"),
+        "{bad}"
+    );
+    client.send(&b"\xff\xfe garbage"[..], 0).unwrap();
+    let reply: Value = serde_json::from_slice(&client.recv_bytes(0).unwrap()).unwrap();
+    assert_eq!(reply["body"]["ok"], false);
+
+    // The first service stopped the mirror on exit; start again and wait for live data.
+    assert_eq!(call(&client, json!({"command": "start"}))["ok"], true);
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while call(&client, json!({"command": "status"}))["data"]["stale"] != false {
+        assert!(Instant::now() < deadline, "never live");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Stale data: the controller stops streaming, status says stale, get is refused.
+    control
+        .send(json!({"command": "pause"}).to_string().as_bytes(), 0)
+        .unwrap();
+    let _ = control.recv_bytes(0).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while call(&client, json!({"command": "status"}))["data"]["stale"] != true {
+        assert!(Instant::now() < deadline, "never stale");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let refused = call(&client, json!({"command": "get"}));
+    assert!(
+        refused["reason"]
+            .as_str()
+            .unwrap()
+            .starts_with("latest joint state is"),
+        "{refused}"
+    );
+
+    service.stop();
+    bridge.stop();
+    sim.stop();
+    let _ = std::fs::remove_dir_all(&folder);
+}
