@@ -9,14 +9,13 @@
 use std::path::Path;
 
 use align_core::io::{TriangleSoup, write_stl_binary};
-use align_core::kinematics::IkOptions;
 use align_core::pose::{isometry_from_xyz_rpy, xyz_rpy};
 use align_core::robots::ShippedRobot;
 use align_core::trials::parts::step_block;
 use ips_client::session::{
     FORMAT, Inspection, PartSection, PoseSection, RobotSection, SessionFile, ToolSection,
 };
-use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/step_block_ur10");
@@ -32,48 +31,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let nominal = isometry_from_xyz_rpy([0.65, -0.22, 0.02], [0.0, 0.0, 0.25]);
     let tcp = isometry_from_xyz_rpy([0.0, 0.0, 0.15], [0.0, 0.0, 0.0]);
     let tip_radius = 0.003;
-    let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
-    let plan = [
-        (Point3::new(0.05, 0.05, 0.15), z),
-        (Point3::new(0.17, 0.06, 0.15), z),
-        (Point3::new(0.1, 0.16, 0.15), z),
-        (Point3::new(0.06, 0.0, 0.09), -y),
-        (Point3::new(0.24, 0.0, 0.04), -y),
-        (Point3::new(0.0, 0.1, 0.08), -x),
-        (Point3::new(0.26, 0.12, 0.07), z),
-        (Point3::new(0.2, 0.06, 0.11), x),
-        (Point3::new(0.3, 0.15, 0.035), x),
-    ];
     let chain = ShippedRobot::Ur10.chain()?;
-    let mut seed = vec![0.0, -1.57, 1.57, -1.57, -1.57, 0.0];
-    let mut inspections = Vec::new();
-    for (index, (point, normal)) in plan.iter().enumerate() {
-        let centre = truth * (point + normal * tip_radius);
-        let probe_axis = truth.rotation * -normal;
-        // Probe z along the approach; x roughly along base x so the wrist stays tidy.
-        let helper = if probe_axis.x.abs() > 0.9 {
-            Vector3::y()
-        } else {
-            Vector3::x()
-        };
-        let y_axis = probe_axis.cross(&helper).normalize();
-        let x_axis = y_axis.cross(&probe_axis);
-        let rotation = Rotation3::from_basis_unchecked(&[x_axis, y_axis, probe_axis]);
-        let base_from_tcp = Isometry3::from_parts(
-            Translation3::from(centre.coords),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        );
-        let base_from_flange = base_from_tcp * tcp.inverse();
-        let solution = chain.inverse(&base_from_flange, &seed, &IkOptions::default())?;
-        seed.clone_from(&solution.q);
-        inspections.push(Inspection {
+    let targets = ips_client::probing::joint_targets(
+        &chain,
+        &truth,
+        &tcp,
+        tip_radius,
+        &ips_client::probing::step_block_table_touches(),
+        &[0.0, -1.57, 1.57, -1.57, -1.57, 0.0],
+    )?;
+    let inspections: Vec<Inspection> = targets
+        .into_iter()
+        .enumerate()
+        .map(|(index, q)| Inspection {
             id: (index + 1).to_string(),
-            q: solution.q,
+            q,
             qd: None,
             stamp: Some(index as f64 * 4.0),
             face: None,
-        });
-    }
+        })
+        .collect();
     let pose = |p: &Isometry3<f64>| {
         let (xyz, rpy) = xyz_rpy(p);
         PoseSection { xyz, rpy }

@@ -56,6 +56,9 @@ pub enum Command {
     Reset(ServiceArgs),
     /// The service's state: mirroring, inspections, age of the latest joint state.
     Status(ServiceArgs),
+    /// The whole loop on the simulator: sim-robot, robot-bridge and the service as child
+    /// processes, nine touches at a hidden part pose, alignment, error against the truth.
+    Demo(crate::demo::DemoArgs),
 }
 
 #[derive(Debug, Args)]

@@ -1,0 +1,457 @@
+//! `ips demo`: the whole loop on the simulator in one command. Starts sim-robot, robot-bridge
+//! and `ips serve` as child processes on free ports, places the step block at a pose only the
+//! simulator knows, drives the robot to nine touches, captures each through the service, aligns,
+//! and prints the result beside the truth. Children are stopped with SIGTERM at the end; if one
+//! dies early the demo says which and fails.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use align_core::io::{TriangleSoup, write_stl_binary};
+use align_core::pose::{isometry_from_xyz_rpy, xyz_rpy};
+use align_core::robots::ShippedRobot;
+use align_core::trials::parts::step_block;
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use crate::BadInput;
+use crate::session::{FORMAT, PartSection, PoseSection, RobotSection, SessionFile, ToolSection};
+
+#[derive(Debug, clap::Args)]
+pub struct DemoArgs {
+    /// Simulated robot (ur10 or ur10e; iiwa14 needs the FRI emulation, not built yet).
+    #[arg(long, default_value = "ur10")]
+    pub robot: String,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct DemoOutput {
+    pub robot: String,
+    pub inspections: usize,
+    /// Distance between the aligned and the true part position, m.
+    pub pose_error_m: f64,
+    /// Angle between the aligned and the true part orientation, rad.
+    pub pose_error_rad: f64,
+    /// The nominal (virtual) pose's error before alignment.
+    pub nominal_error_m: f64,
+    pub nominal_error_rad: f64,
+    pub rms_m: f64,
+    pub align_time_s: f64,
+    pub pose: Value,
+    pub truth: Value,
+}
+
+struct ChildService {
+    name: &'static str,
+    child: Child,
+    endpoints: Vec<(String, String)>,
+}
+
+impl ChildService {
+    fn endpoint(&self, key: &str) -> Result<String, BadInput> {
+        self.endpoints
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.clone())
+            .ok_or_else(|| BadInput(format!("{} printed no '{key}' endpoint", self.name)))
+    }
+
+    fn check_alive(&mut self) -> Result<(), BadInput> {
+        match self.child.try_wait() {
+            Ok(Some(status)) => Err(BadInput(format!("{} exited early ({status})", self.name))),
+            _ => Ok(()),
+        }
+    }
+
+    fn terminate(mut self) {
+        let _ = Command::new("kill")
+            .arg("-TERM")
+            .arg(self.child.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for ChildService {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+fn sibling_binary(name: &str) -> Result<PathBuf, BadInput> {
+    let here = std::env::current_exe().map_err(BadInput::new)?;
+    let path = here.with_file_name(name);
+    if path.exists() {
+        Ok(path)
+    } else {
+        Err(BadInput(format!(
+            "'{}' not found next to ips; build the services first: cargo build --release --locked -p sim-robot -p robot-bridge",
+            path.display()
+        )))
+    }
+}
+
+fn spawn(name: &'static str, program: &Path, args: &[String]) -> Result<ChildService, BadInput> {
+    let mut child = Command::new(program)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|error| BadInput(format!("cannot start {name}: {error}")))?;
+    let stdout = child
+        .stdout
+        .take()
+        .ok_or_else(|| BadInput(format!("{name}: no stdout")))?;
+    let (sender, receiver) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if line.starts_with("READY") {
+                let _ = sender.send(line);
+            }
+        }
+    });
+    let mut service = ChildService {
+        name,
+        child,
+        endpoints: Vec::new(),
+    };
+    let line = receiver
+        .recv_timeout(Duration::from_secs(30))
+        .map_err(|_| {
+            let state = service
+                .check_alive()
+                .err()
+                .map_or("still running".to_owned(), |e| e.0);
+            BadInput(format!("{name} did not report READY within 30 s ({state})"))
+        })?;
+    service.endpoints = line
+        .split_whitespace()
+        .skip(1)
+        .filter_map(|pair| {
+            pair.split_once('=')
+                .map(|(k, v)| (k.to_owned(), v.to_owned()))
+        })
+        .collect();
+    Ok(service)
+}
+
+fn request(socket: &zmq::Socket, body: Value, what: &str) -> Result<Value, BadInput> {
+    let message =
+        json!({"header": {"from": "ips", "to": "align", "type": "request"}, "body": body});
+    socket
+        .send(message.to_string().as_bytes(), 0)
+        .map_err(BadInput::new)?;
+    let reply = socket
+        .recv_bytes(0)
+        .map_err(|_| BadInput(format!("{what}: no reply within the timeout")))?;
+    serde_json::from_slice(&reply).map_err(|error| BadInput(format!("{what}: bad reply: {error}")))
+}
+
+fn zmq_socket(
+    context: &zmq::Context,
+    kind: zmq::SocketType,
+    endpoint: &str,
+) -> Result<zmq::Socket, BadInput> {
+    let socket = context.socket(kind).map_err(BadInput::new)?;
+    socket.set_linger(0).map_err(BadInput::new)?;
+    socket.set_rcvtimeo(10_000).map_err(BadInput::new)?;
+    socket.connect(endpoint).map_err(BadInput::new)?;
+    Ok(socket)
+}
+
+pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput, BadInput> {
+    let robot = match ShippedRobot::from_name(&args.robot) {
+        Some(robot @ (ShippedRobot::Ur10 | ShippedRobot::Ur10e)) => robot,
+        Some(ShippedRobot::Iiwa14) => {
+            return Err(BadInput(
+                "--robot iiwa14: the iiwa's FRI emulation and back end are not built yet"
+                    .to_owned(),
+            ));
+        }
+        None => {
+            return Err(BadInput(format!(
+                "--robot '{}': expected ur10 or ur10e",
+                args.robot
+            )));
+        }
+    };
+    let sim_program = sibling_binary("sim-robot")?;
+    let bridge_program = sibling_binary("robot-bridge")?;
+    let ips_program = std::env::current_exe().map_err(BadInput::new)?;
+
+    // The cell: the step block at a pose the service is not told, a nominal pose 40 mm / 6
+    // degrees off, a probe with a 3 mm ball 150 mm from the flange.
+    let folder = std::env::temp_dir().join(format!("cobot-align-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&folder).map_err(BadInput::new)?;
+    let part = step_block().map_err(BadInput::new)?;
+    let soup = TriangleSoup {
+        vertices: part.mesh.vertices().collect(),
+        triangles: part.mesh.triangles().to_vec(),
+    };
+    write_stl_binary(&folder.join("part.stl"), &soup).map_err(BadInput::new)?;
+    std::fs::write(folder.join("robot.urdf"), robot.urdf()).map_err(BadInput::new)?;
+    let truth = isometry_from_xyz_rpy([0.62, -0.25, 0.02], [0.0, 0.0, 0.35]);
+    let nominal = isometry_from_xyz_rpy([0.65, -0.22, 0.02], [0.0, 0.0, 0.25]);
+    let tcp = isometry_from_xyz_rpy([0.0, 0.0, 0.15], [0.0; 3]);
+    let tip_radius = 0.003;
+    let pose = |p: &nalgebra::Isometry3<f64>| {
+        let (xyz, rpy) = xyz_rpy(p);
+        PoseSection { xyz, rpy }
+    };
+    let template = SessionFile {
+        format: FORMAT.to_owned(),
+        robot: RobotSection {
+            urdf: "robot.urdf".to_owned(),
+            base_link: robot.base_link().to_owned(),
+            tip_link: robot.flange_link().to_owned(),
+            package_dirs: Default::default(),
+        },
+        tool: ToolSection {
+            tcp: pose(&tcp),
+            tip_radius,
+            mass: 0.4,
+        },
+        part: PartSection {
+            mesh: "part.stl".to_owned(),
+            mesh_scale: 1.0,
+            nominal_pose: pose(&nominal),
+            faces: Vec::new(),
+        },
+        noise_sigma: Some(0.00005),
+        inspections: Vec::new(),
+    };
+    let session_path = folder.join("session.json");
+    std::fs::write(
+        &session_path,
+        serde_json::to_string_pretty(&template).map_err(BadInput::new)?,
+    )
+    .map_err(BadInput::new)?;
+    let journal = folder.join("inspections.journal");
+    let _ = std::fs::remove_file(&journal);
+    let chain = robot.chain().map_err(BadInput::new)?;
+    let targets = crate::probing::joint_targets(
+        &chain,
+        &truth,
+        &tcp,
+        tip_radius,
+        &crate::probing::step_block_table_touches(),
+        &sim_robot_home(),
+    )
+    .map_err(|error| BadInput(format!("cannot plan the touches: {error}")))?;
+
+    progress("starting sim-robot, robot-bridge and the alignment service");
+    let mut sim = spawn(
+        "sim-robot",
+        &sim_program,
+        &[
+            "--robot",
+            robot.name(),
+            "--rtde-host",
+            "127.0.0.1",
+            "--rtde-port",
+            "0",
+            "--control",
+            "tcp://127.0.0.1:*",
+        ]
+        .map(str::to_owned),
+    )?;
+    let rtde_port = sim
+        .endpoint("rtde")?
+        .rsplit(':')
+        .next()
+        .unwrap_or("30004")
+        .to_owned();
+    let mut bridge = spawn(
+        "robot-bridge",
+        &bridge_program,
+        &[
+            "--backend",
+            "ur",
+            "--robot-host",
+            "127.0.0.1",
+            "--rtde-port",
+            &rtde_port,
+            "--rep",
+            "tcp://127.0.0.1:*",
+            "--pub",
+            "tcp://127.0.0.1:*",
+        ]
+        .map(str::to_owned),
+    )?;
+    let (bridge_rep, bridge_pub) = (bridge.endpoint("rep")?, bridge.endpoint("pub")?);
+    let mut service = spawn(
+        "ips serve",
+        &ips_program,
+        &[
+            "serve".to_owned(),
+            "--session".to_owned(),
+            session_path.display().to_string(),
+            "--journal".to_owned(),
+            journal.display().to_string(),
+            "--rep".to_owned(),
+            "tcp://127.0.0.1:*".to_owned(),
+            "--bridge-rep".to_owned(),
+            bridge_rep,
+            "--bridge-pub".to_owned(),
+            bridge_pub.clone(),
+        ],
+    )?;
+    let context = zmq::Context::new();
+    let client = zmq_socket(&context, zmq::REQ, &service.endpoint("rep")?)?;
+    let control = zmq_socket(&context, zmq::REQ, &sim.endpoint("control")?)?;
+    let sub = zmq_socket(&context, zmq::SUB, &bridge_pub)?;
+    sub.set_subscribe(b"").map_err(BadInput::new)?;
+
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let reply = request(&client, json!({"command": "start"}), "start")?;
+        if reply["body"]["ok"] == true {
+            break;
+        }
+        for child in [&mut sim, &mut bridge, &mut service] {
+            child.check_alive()?;
+        }
+        if Instant::now() > deadline {
+            return Err(BadInput(format!(
+                "the service could not start mirroring: {}",
+                reply["body"]["reason"]
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    for (index, q) in targets.iter().enumerate() {
+        control
+            .send(
+                json!({"command": "motion", "motion": {"kind": "hold", "q": q}})
+                    .to_string()
+                    .as_bytes(),
+                0,
+            )
+            .map_err(BadInput::new)?;
+        let reply: Value = serde_json::from_slice(
+            &control
+                .recv_bytes(0)
+                .map_err(|_| BadInput("sim-robot control: no reply".to_owned()))?,
+        )
+        .map_err(BadInput::new)?;
+        if reply["ok"] != true {
+            return Err(BadInput(format!(
+                "sim-robot refused touch {}: {}",
+                index + 1,
+                reply["reason"]
+            )));
+        }
+        // The robot is at rest at the touch once the stream shows the pose twice more.
+        let mut seen_after = None::<u32>;
+        while seen_after.is_none_or(|n| n < 2) {
+            let bytes = sub
+                .recv_bytes(0)
+                .map_err(|_| BadInput("the hardware-state stream went silent".to_owned()))?;
+            let state: Value = serde_json::from_slice(&bytes).map_err(BadInput::new)?;
+            let at_touch = state["body"]["position"].as_array().is_some_and(|p| {
+                p.iter()
+                    .zip(q)
+                    .all(|(a, b)| a.as_f64().is_some_and(|a| (a - b).abs() < 1e-9))
+            });
+            seen_after = match (seen_after, at_touch) {
+                (None, true) => Some(0),
+                (Some(n), _) => Some(n + 1),
+                (None, false) => None,
+            };
+        }
+        let reply = request(&client, json!({"command": "get"}), "get")?;
+        if reply["body"]["ok"] != true {
+            return Err(BadInput(format!(
+                "get refused at touch {}: {}",
+                index + 1,
+                reply["body"]["reason"]
+            )));
+        }
+        progress(&format!(
+            "touch {} of {} captured",
+            index + 1,
+            targets.len()
+        ));
+    }
+    let aligned = request(&client, json!({"command": "align"}), "align")?;
+    let _ = request(&client, json!({"command": "stop"}), "stop");
+    for child in [&mut sim, &mut bridge, &mut service] {
+        child.check_alive()?;
+    }
+    for child in [service, bridge, sim] {
+        child.terminate();
+    }
+    let _ = std::fs::remove_dir_all(&folder);
+    if aligned["body"]["ok"] != true {
+        return Err(BadInput(format!(
+            "align failed: {}",
+            aligned["body"]["reason"]
+        )));
+    }
+    let data = &aligned["body"]["data"];
+    let xyz: Vec<f64> = (0..3)
+        .map(|i| data["pose"]["xyz"][i].as_f64().unwrap_or(f64::NAN))
+        .collect();
+    let rpy: Vec<f64> = (0..3)
+        .map(|i| data["pose"]["rpy"][i].as_f64().unwrap_or(f64::NAN))
+        .collect();
+    let found = isometry_from_xyz_rpy([xyz[0], xyz[1], xyz[2]], [rpy[0], rpy[1], rpy[2]]);
+    let error = |p: &nalgebra::Isometry3<f64>| {
+        (
+            (p.translation.vector - truth.translation.vector).norm(),
+            p.rotation.angle_to(&truth.rotation),
+        )
+    };
+    let (pose_error_m, pose_error_rad) = error(&found);
+    let (nominal_error_m, nominal_error_rad) = error(&nominal);
+    Ok(DemoOutput {
+        robot: robot.name().to_owned(),
+        inspections: targets.len(),
+        pose_error_m,
+        pose_error_rad,
+        nominal_error_m,
+        nominal_error_rad,
+        rms_m: data["rms"].as_f64().unwrap_or(f64::NAN),
+        align_time_s: data["time_s"].as_f64().unwrap_or(f64::NAN),
+        pose: data["pose"].clone(),
+        truth: serde_json::to_value(pose(&truth)).unwrap_or(Value::Null),
+    })
+}
+
+fn sim_robot_home() -> Vec<f64> {
+    use std::f64::consts::FRAC_PI_2;
+    vec![0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0]
+}
+
+impl DemoOutput {
+    pub fn to_text(&self) -> String {
+        format!(
+            "{} touches on the {} aligned the part:\n  nominal pose error: {:8.3} mm  {:8.3} mrad\n  aligned pose error: {:8.5} mm  {:8.5} mrad\n  residual rms {:.4} mm, alignment {:.1} ms\n",
+            self.inspections,
+            self.robot,
+            self.nominal_error_m * 1e3,
+            self.nominal_error_rad * 1e3,
+            self.pose_error_m * 1e3,
+            self.pose_error_rad * 1e3,
+            self.rms_m * 1e3,
+            self.align_time_s * 1e3
+        )
+    }
+}

@@ -1,0 +1,63 @@
+//! Planning touches on a part: where to touch, and the joint configuration that puts the probe's
+//! ball on each point with the probe along the inward normal. Used by the example data and by
+//! `ips demo` to drive the simulated robot.
+
+use align_core::kinematics::{Chain, IkError, IkOptions};
+use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+/// Touches on the step block (part frame: point on the surface, outward normal) for a part on a
+/// table, reachable from above and the sides: three on the top, two on the front, one on the
+/// left end, then the step's tread and riser and the right end.
+pub fn step_block_table_touches() -> Vec<(Point3<f64>, Vector3<f64>)> {
+    let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+    vec![
+        (Point3::new(0.05, 0.05, 0.15), z),
+        (Point3::new(0.17, 0.06, 0.15), z),
+        (Point3::new(0.1, 0.16, 0.15), z),
+        (Point3::new(0.06, 0.0, 0.09), -y),
+        (Point3::new(0.24, 0.0, 0.04), -y),
+        (Point3::new(0.0, 0.1, 0.08), -x),
+        (Point3::new(0.26, 0.12, 0.07), z),
+        (Point3::new(0.2, 0.06, 0.11), x),
+        (Point3::new(0.3, 0.15, 0.035), x),
+    ]
+}
+
+/// Joint vectors touching each point of `touches` on the part at `base_from_part`, each solved
+/// from the previous (so the arm moves little between touches).
+pub fn joint_targets(
+    chain: &Chain,
+    base_from_part: &Isometry3<f64>,
+    flange_from_tcp: &Isometry3<f64>,
+    tip_radius_m: f64,
+    touches: &[(Point3<f64>, Vector3<f64>)],
+    seed: &[f64],
+) -> Result<Vec<Vec<f64>>, IkError> {
+    let mut seed = seed.to_vec();
+    let mut targets = Vec::with_capacity(touches.len());
+    for (point, normal) in touches {
+        let centre = base_from_part * (point + normal * tip_radius_m);
+        let probe_axis = base_from_part.rotation * -normal;
+        // Probe z along the approach; x roughly along base x so the wrist stays tidy.
+        let helper = if probe_axis.x.abs() > 0.9 {
+            Vector3::y()
+        } else {
+            Vector3::x()
+        };
+        let y_axis = probe_axis.cross(&helper).normalize();
+        let x_axis = y_axis.cross(&probe_axis);
+        let rotation = Rotation3::from_basis_unchecked(&[x_axis, y_axis, probe_axis]);
+        let base_from_tcp = Isometry3::from_parts(
+            Translation3::from(centre.coords),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        );
+        let solution = chain.inverse(
+            &(base_from_tcp * flange_from_tcp.inverse()),
+            &seed,
+            &IkOptions::default(),
+        )?;
+        seed.clone_from(&solution.q);
+        targets.push(solution.q);
+    }
+    Ok(targets)
+}

@@ -1,0 +1,55 @@
+//! `ips demo` runs in CI: the whole loop on the simulator, as a user types it.
+
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The demo starts the sibling binaries; `cargo test -p ips-client` alone does not build them.
+fn ensure_services_built() {
+    let ips = PathBuf::from(env!("CARGO_BIN_EXE_ips"));
+    if ips.with_file_name("sim-robot").exists() && ips.with_file_name("robot-bridge").exists() {
+        return;
+    }
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    let status = Command::new(cargo)
+        .args(["build", "-p", "sim-robot", "-p", "robot-bridge"])
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+#[test]
+fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
+    ensure_services_built();
+    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(["demo", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let error_m = result["pose_error_m"].as_f64().unwrap();
+    let error_rad = result["pose_error_rad"].as_f64().unwrap();
+    assert!(error_m < 1e-4, "{error_m} m");
+    assert!(error_rad < 1e-4, "{error_rad} rad");
+    assert!(result["nominal_error_m"].as_f64().unwrap() > 0.01);
+    assert_eq!(result["inspections"], 9);
+}
+
+#[test]
+fn demo_refuses_robots_it_cannot_simulate() {
+    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(["demo", "--robot", "iiwa14"])
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&output.stderr)
+            .contains("FRI emulation and back end are not built yet")
+    );
+}
