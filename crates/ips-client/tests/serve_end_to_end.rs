@@ -226,3 +226,100 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
     sim.stop();
     let _ = std::fs::remove_dir_all(&folder);
 }
+
+#[test]
+fn a_bridge_restart_mid_session_is_recovered() {
+    let sim = sim_robot::start(&sim_robot::Config {
+        robot: ShippedRobot::Ur10,
+        rtde_listen: "127.0.0.1:0".to_owned(),
+        control: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .unwrap();
+    let port: u16 = sim
+        .rtde_address
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let bridge_config = |rep: &str, publish: &str| robot_bridge::Config {
+        backend: robot_bridge::BackendKind::Ur,
+        robot_host: "127.0.0.1".to_owned(),
+        rtde_port: port,
+        fri_port: 30200,
+        rep: rep.to_owned(),
+        publish: publish.to_owned(),
+    };
+    let bridge =
+        robot_bridge::start(&bridge_config("tcp://127.0.0.1:*", "tcp://127.0.0.1:*")).unwrap();
+    let (rep_endpoint, pub_endpoint) = (bridge.rep_endpoint.clone(), bridge.pub_endpoint.clone());
+    let mut template: Value =
+        serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
+    template["inspections"] = json!([]);
+    template["robot"]["urdf"] = json!(example("../../robots/ur10.urdf").to_str().unwrap());
+    template["part"]["mesh"] = json!(example("step_block.stl").to_str().unwrap());
+    let folder =
+        std::env::temp_dir().join(format!("cobot-align-bridge-restart-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&folder);
+    std::fs::create_dir_all(&folder).unwrap();
+    std::fs::write(folder.join("template.json"), template.to_string()).unwrap();
+    let service = serve(&ServeConfig {
+        session: folder.join("template.json"),
+        journal: folder.join("j"),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        bridge_rep: rep_endpoint.clone(),
+        bridge_pub: pub_endpoint.clone(),
+        max_sample_age_s: 0.1,
+        max_tool_speed_m_s: 0.005,
+    });
+    let context = zmq::Context::new();
+    let client = req(&context, &service.rep_endpoint);
+    let start_and_get = |client: &zmq::Socket| {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            let started = call(client, json!({"command": "start"}));
+            let got = if started["ok"] == true {
+                call(client, json!({"command": "get"}))
+            } else {
+                started
+            };
+            if got["ok"] == true {
+                return got;
+            }
+            assert!(Instant::now() < deadline, "{got}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    assert_eq!(start_and_get(&client)["data"]["id"], "1");
+
+    // The bridge goes away: the stream stops, get is refused as stale.
+    bridge.stop();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let refused = call(&client, json!({"command": "get"}));
+        if refused["ok"] == false {
+            assert!(
+                refused["reason"].as_str().unwrap().contains("old"),
+                "{refused}"
+            );
+            break;
+        }
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // It comes back on the same endpoints: the service's subscription reconnects by itself.
+    let before = call(&client, json!({"command": "list"}))["data"]["inspections"]
+        .as_array()
+        .unwrap()
+        .len();
+    let bridge = robot_bridge::start(&bridge_config(&rep_endpoint, &pub_endpoint)).unwrap();
+    // (A get taken in the first 100 ms after the bridge stopped was still fresh, and counted.)
+    assert_eq!(
+        start_and_get(&client)["data"]["id"],
+        (before + 1).to_string()
+    );
+    service.stop();
+    bridge.stop();
+    sim.stop();
+    let _ = std::fs::remove_dir_all(&folder);
+}
