@@ -85,6 +85,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         folder.join("truth.json"),
         serde_json::to_string_pretty(&serde_json::json!({"base_from_part": pose(&truth)}))? + "\n",
     )?;
+    // The same cell touched with a 3.4 mm ball while the session still declares 3 mm: an
+    // undeclared effect for `ips diagnose` to find.
+    let bigger_ball = ips_client::probing::joint_targets(
+        &chain,
+        &truth,
+        &tcp,
+        0.0034,
+        &ips_client::probing::step_block_table_touches(),
+        &[0.0, -1.57, 1.57, -1.57, -1.57, 0.0],
+    )?;
+    let mut wrong_radius = session.clone();
+    for (inspection, q) in wrong_radius.inspections.iter_mut().zip(bigger_ball) {
+        inspection.q = q;
+    }
+    std::fs::write(
+        folder.join("session_probe_radius.json"),
+        serde_json::to_string_pretty(&wrong_radius)? + "\n",
+    )?;
     // A scan of the same cell: three scanner positions, the floor, a neighbouring box, 10%
     // outliers and 0.3 mm noise, written in mm with 0.01 mm resolution.
     let scan = align_core::trials::clouds::ScanOptions {

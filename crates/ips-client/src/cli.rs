@@ -59,6 +59,9 @@ pub enum Command {
     /// The whole loop on the simulator: sim-robot, robot-bridge and the service as child
     /// processes, nine touches at a hidden part pose, alignment, error against the truth.
     Demo(crate::demo::DemoArgs),
+    /// Align, then trace the residual to an effect the model lacks (probe radius, TCP offset,
+    /// joint offsets, part scale, trigger latency) and report the error before and after.
+    Diagnose(crate::diagnose::DiagnoseArgs),
 }
 
 #[derive(Debug, Args)]

@@ -7,6 +7,7 @@ pub mod align_cloud;
 pub mod cli;
 pub mod client;
 pub mod demo;
+pub mod diagnose;
 pub mod fk;
 pub mod probing;
 pub mod serve;

@@ -62,6 +62,14 @@ fn run(command: Command) -> Result<String, BadInput> {
         Command::Remove(args) => {
             ips_client::client::call("remove", args.ids.clone(), &args.service)
         }
+        Command::Diagnose(args) => {
+            let output = ips_client::diagnose::run(&args)?;
+            Ok(if args.json {
+                json_line(&output)?
+            } else {
+                output.to_text()
+            })
+        }
         Command::Demo(args) => {
             let output = ips_client::demo::run(&args, |line| eprintln!("{line}"))?;
             Ok(if args.json {

@@ -1,0 +1,235 @@
+//! `ips diagnose SESSION`: align, then trace what is left to an effect the model lacks
+//! (DESIGN.md 6.4 keys), and draw the residuals per touch before and after as an SVG next to
+//! the session.
+
+use std::path::PathBuf;
+
+use align_core::diagnosis::{Diagnosis, Fit, TouchSample, diagnose};
+use align_core::pose::xyz_rpy;
+use align_core::registration::psa::{PsaOptions, PsaTarget, align_touches};
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use crate::BadInput;
+use crate::session::LoadedSession;
+
+#[derive(Debug, clap::Args)]
+pub struct DiagnoseArgs {
+    /// Session file; its `noise_sigma` is the declared touch noise (m).
+    #[arg(value_name = "SESSION")]
+    pub session: PathBuf,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct DiagnoseOutput {
+    pub verdict: String,
+    pub effect: Value,
+    pub alternatives: Vec<Value>,
+    pub before: Value,
+    pub after: Value,
+    pub pose_before: Value,
+    pub pose_after: Value,
+    pub inspections: Vec<Value>,
+    pub explanation: String,
+    pub chi_square: [f64; 2],
+    /// The picture of the residuals, written next to the session.
+    pub plot: String,
+}
+
+fn summary(fit: &Fit) -> Value {
+    json!({"rms": fit.rms_m, "max": fit.max_m, "loo_rms": fit.loo_rms_m})
+}
+
+fn pose(fit: &Fit) -> Value {
+    let (xyz, rpy) = xyz_rpy(&fit.base_from_part);
+    json!({"xyz": xyz, "rpy": rpy})
+}
+
+fn effect_json(name: &str, fit: &Fit) -> Value {
+    let params: serde_json::Map<String, Value> = fit
+        .params
+        .iter()
+        .map(|(k, v, _)| (k.clone(), json!(v)))
+        .collect();
+    let stderr: serde_json::Map<String, Value> = fit
+        .params
+        .iter()
+        .map(|(k, _, s)| (k.clone(), json!(s)))
+        .collect();
+    json!({"name": name, "params": params, "stderr": stderr, "bic": fit.bic})
+}
+
+pub fn run(args: &DiagnoseArgs) -> Result<DiagnoseOutput, BadInput> {
+    let session = LoadedSession::load(&args.session)?;
+    let sigma = session.file.noise_sigma.ok_or_else(|| {
+        BadInput(
+            "the session declares no noise_sigma (m), which diagnosis tests against".to_owned(),
+        )
+    })?;
+    let target = PsaTarget::new(&session.mesh)
+        .with_faces(&session.faces)
+        .map_err(BadInput::new)?;
+    let options = PsaOptions {
+        tip_radius_m: session.tool.tip_radius_m,
+        ..PsaOptions::default()
+    };
+    let aligned = align_touches(
+        &target,
+        &session.touches,
+        &session.base_from_part_nominal,
+        &options,
+    )
+    .map_err(|error| BadInput(format!("cannot align: {error}")))?;
+    let samples: Vec<TouchSample> = session
+        .file
+        .inspections
+        .iter()
+        .map(|i| TouchSample {
+            id: i.id.clone(),
+            q: i.q.clone(),
+            qd: i.qd.clone(),
+        })
+        .collect();
+    let diagnosis = diagnose(
+        &session.chain,
+        &session.tool,
+        &session.mesh,
+        &samples,
+        &aligned.base_from_part,
+        sigma,
+    )
+    .map_err(BadInput)?;
+    let plot = args.session.with_extension("diagnosis.svg");
+    std::fs::write(&plot, svg(&diagnosis, &samples, sigma))
+        .map_err(|error| BadInput(format!("cannot write '{}': {error}", plot.display())))?;
+    Ok(DiagnoseOutput {
+        verdict: diagnosis.verdict.name().to_owned(),
+        effect: diagnosis.effect.as_ref().map_or(Value::Null, |(name, fit)| effect_json(name, fit)),
+        alternatives: diagnosis
+            .alternatives
+            .iter()
+            .map(|a| json!({"name": a.name, "reason": a.reason, "bic": a.fit.as_ref().map(|f| f.bic), "loo_rms": a.fit.as_ref().map(|f| f.loo_rms_m)}))
+            .collect(),
+        before: summary(&diagnosis.before),
+        after: summary(&diagnosis.after),
+        pose_before: pose(&diagnosis.before),
+        pose_after: pose(&diagnosis.after),
+        inspections: samples
+            .iter()
+            .enumerate()
+            .map(|(i, s)| json!({"id": s.id, "residual_before": diagnosis.before.residuals_m[i], "residual_after": diagnosis.after.residuals_m[i]}))
+            .collect(),
+        explanation: diagnosis.explanation.clone(),
+        chi_square: [diagnosis.chi_square.0, diagnosis.chi_square.1],
+        plot: plot.display().to_string(),
+    })
+}
+
+/// Residual per touch, before (grey) and after (blue), with the +-2 sigma band.
+fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
+    let (width, height, margin) = (80.0 + 40.0 * samples.len() as f64, 320.0, 40.0);
+    let largest = diagnosis
+        .before
+        .residuals_m
+        .iter()
+        .chain(&diagnosis.after.residuals_m)
+        .fold(3.0 * sigma, |m, r| m.max(r.abs()));
+    let y = |value: f64| height / 2.0 - value / largest * (height / 2.0 - margin);
+    let mut out = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
+         <text x=\"10\" y=\"18\">Residual per touch (mm): before (grey), after {} (blue); band = +-2 sigma. Verdict: {}</text>\n\
+         <rect x=\"{margin}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#e8f0e8\"/>\n\
+         <line x1=\"{margin}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\"/>\n",
+        diagnosis
+            .effect
+            .as_ref()
+            .map_or("(no effect applied)".to_owned(), |(n, _)| format!(
+                "modelling {n}"
+            )),
+        diagnosis.verdict.name(),
+        y(2.0 * sigma),
+        width - 2.0 * margin,
+        y(-2.0 * sigma) - y(2.0 * sigma),
+        y(0.0),
+        width - margin,
+        y(0.0)
+    );
+    for (i, sample) in samples.iter().enumerate() {
+        let x = margin + 20.0 + 40.0 * i as f64;
+        for (offset, value, colour) in [
+            (-6.0, diagnosis.before.residuals_m[i], "#999"),
+            (6.0, diagnosis.after.residuals_m[i], "#2a6fdb"),
+        ] {
+            let (top, bottom) = if value >= 0.0 {
+                (y(value), y(0.0))
+            } else {
+                (y(0.0), y(value))
+            };
+            out += &format!(
+                "<rect x=\"{:.1}\" y=\"{top:.1}\" width=\"10\" height=\"{:.1}\" fill=\"{colour}\"><title>{} {:+.4} mm</title></rect>\n",
+                x + offset - 5.0,
+                (bottom - top).max(0.5),
+                sample.id,
+                value * 1e3
+            );
+        }
+        out += &format!(
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\n",
+            x,
+            height - 10.0,
+            sample.id
+        );
+    }
+    out += &format!(
+        "<text x=\"5\" y=\"{:.1}\">{:+.3}</text>\n",
+        y(largest) + 4.0,
+        largest * 1e3
+    );
+    out += &format!(
+        "<text x=\"5\" y=\"{:.1}\">{:+.3}</text>\n</svg>\n",
+        y(-largest) + 4.0,
+        -largest * 1e3
+    );
+    out
+}
+
+impl DiagnoseOutput {
+    pub fn to_text(&self) -> String {
+        let mut text = format!("verdict: {}\n{}\n", self.verdict, self.explanation);
+        if let Some(name) = self.effect["name"].as_str() {
+            text += &format!("effect: {name}\n");
+            if let Some(params) = self.effect["params"].as_object() {
+                for (key, value) in params {
+                    text += &format!(
+                        "  {key} = {:.6e} +- {:.1e}\n",
+                        value.as_f64().unwrap_or(f64::NAN),
+                        self.effect["stderr"][key].as_f64().unwrap_or(f64::NAN)
+                    );
+                }
+            }
+        }
+        let mm = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN) * 1e3;
+        text += &format!(
+            "residual rms / max / leave-one-out (mm): before {:.4} / {:.4} / {:.4}, after {:.4} / {:.4} / {:.4}\n",
+            mm(&self.before, "rms"),
+            mm(&self.before, "max"),
+            mm(&self.before, "loo_rms"),
+            mm(&self.after, "rms"),
+            mm(&self.after, "max"),
+            mm(&self.after, "loo_rms")
+        );
+        for alternative in &self.alternatives {
+            text += &format!(
+                "  not chosen: {}: {}\n",
+                alternative["name"].as_str().unwrap_or("?"),
+                alternative["reason"].as_str().unwrap_or("")
+            );
+        }
+        text += &format!("plot: {}\n", self.plot);
+        text
+    }
+}
