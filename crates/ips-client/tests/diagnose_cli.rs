@@ -41,9 +41,11 @@ fn diagnose(path: &Path) -> serde_json::Value {
 
 #[test]
 fn noiseless_session_has_no_effect() {
-    let result = diagnose(&scratch_session("session.json"));
+    let path = scratch_session("session.json");
+    let result = diagnose(&path);
     assert_eq!(result["verdict"], "no_effect");
     assert!(result["effect"].is_null());
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
 
 #[test]
