@@ -47,7 +47,6 @@ struct ControllerState {
 }
 
 struct Shared {
-    shutdown: AtomicBool,
     mirroring: AtomicBool,
     published: AtomicU64,
     controller: Mutex<ControllerState>,
@@ -120,7 +119,6 @@ pub fn start(config: &Config) -> Result<Handle, BridgeError> {
     let (rep, rep_endpoint) = bind(&context, zmq::REP, &config.rep)?;
     let (publisher, pub_endpoint) = bind(&context, zmq::PUB, &config.publish)?;
     let shared = Arc::new(Shared {
-        shutdown: AtomicBool::new(false),
         mirroring: AtomicBool::new(false),
         published: AtomicU64::new(0),
         controller: Mutex::new(ControllerState {
@@ -232,7 +230,6 @@ fn backend_loop(
             }
         }
     }
-    shared.shutdown.store(true, Ordering::Relaxed);
 }
 
 fn publish_loop(
