@@ -195,6 +195,7 @@ fn noise_alone_gives_no_effect_in_at_least_95_percent_of_seeds() {
             diagnose(&cell.chain, &cell.tool, &cell.mesh, &samples, &start, SIGMA).unwrap();
         no_effect += usize::from(diagnosis.verdict == Verdict::NoEffect);
     }
+    println!("no_effect in {no_effect}/{seeds} noise-only sessions");
     assert!(
         no_effect * 100 >= 95 * seeds as usize,
         "{no_effect}/{seeds}"
