@@ -13,7 +13,7 @@
 //! | --- | --- | --- |
 //! | `probe_radius` | ball radius change (m) | 5 mm |
 //! | `tcp_offset` | TCP shift in the flange frame (m) | 20 mm |
-//! | `joint_offsets` | encoder offset per joint (rad) | 0.05 rad |
+//! | `joint_offsets` | encoder offset per joint but the first and last (rad) | 0.05 rad |
 //! | `part_scale` | relative size change of the part about its origin | 1 % |
 //! | `trigger_latency` | delay between contact and sample (s), needs joint velocities | 0.5 s |
 //!
@@ -69,7 +69,7 @@ impl Effect {
         match self {
             Effect::ProbeRadius => vec!["delta_radius_m".to_owned()],
             Effect::TcpOffset => ["dx_m", "dy_m", "dz_m"].map(str::to_owned).to_vec(),
-            Effect::JointOffsets => (1..=dof).map(|j| format!("joint_{j}_rad")).collect(),
+            Effect::JointOffsets => (2..dof).map(|j| format!("joint_{j}_rad")).collect(),
             Effect::PartScale => vec!["scale_minus_one".to_owned()],
             Effect::TriggerLatency => vec!["latency_s".to_owned()],
         }
@@ -144,6 +144,8 @@ struct Problem<'a> {
     touches: &'a [TouchSample],
     start: Isometry3<f64>,
     centre: Point3<f64>,
+    /// Joints whose offsets `joint_offsets` fits (indices into the chain's joints).
+    joints: Vec<usize>,
 }
 
 impl Problem<'_> {
@@ -152,7 +154,10 @@ impl Problem<'_> {
             None => 0,
             Some(Effect::ProbeRadius | Effect::PartScale | Effect::TriggerLatency) => 1,
             Some(Effect::TcpOffset) => 3,
-            Some(Effect::JointOffsets) => self.chain.dof(),
+            // The first joint's offset is a turn of the whole cell about the base axis, the same
+            // as a part yaw; the last turns the ball about its own centre on a probe along the
+            // flange axis: neither is visible in touches, so only the joints between are fitted.
+            Some(Effect::JointOffsets) => self.joints.len(),
         }
     }
 
@@ -186,7 +191,9 @@ impl Problem<'_> {
                 let mut q = touch.q.clone();
                 match effect {
                     Some(Effect::JointOffsets) => {
-                        q.iter_mut().enumerate().for_each(|(j, v)| *v += extra(j))
+                        for (k, &joint) in self.joints.iter().enumerate() {
+                            q[joint] += extra(k);
+                        }
                     }
                     Some(Effect::TriggerLatency) => {
                         if let Some(qd) = &touch.qd {
@@ -318,7 +325,15 @@ impl Problem<'_> {
             .ok_or("singular information matrix")?;
         let rss = residual.norm_squared();
         let loo = self.leave_one_out(effect);
-        let names = effect.map_or_else(Vec::new, |e| e.parameter_names(self.chain.dof()));
+        let names = match effect {
+            Some(Effect::JointOffsets) => self
+                .joints
+                .iter()
+                .map(|j| format!("joint_{}_rad", j + 1))
+                .collect(),
+            Some(effect) => effect.parameter_names(self.chain.dof()),
+            None => Vec::new(),
+        };
         let params = names
             .into_iter()
             .enumerate()
@@ -394,13 +409,14 @@ pub fn diagnose(
             chain.dof()
         ));
     }
-    let problem = Problem {
+    let mut problem = Problem {
         chain,
         tool,
         mesh,
         touches,
         start: *base_from_part,
         centre: mesh.centroid(),
+        joints: (1..chain.dof().saturating_sub(1)).collect(),
     };
     let sigma = noise_sigma_m;
     let baseline_theta = problem.fit(None, None);
@@ -435,8 +451,28 @@ pub fn diagnose(
             });
             continue;
         }
-        let theta = problem.fit(Some(effect), None);
-        match problem.summarise(Some(effect), &theta, sigma) {
+        let mut theta = problem.fit(Some(effect), None);
+        let mut summary = problem.summarise(Some(effect), &theta, sigma);
+        // Joint offsets are fitted for the subset of joints the touches can tell apart: the
+        // least significant joint is dropped and the rest refitted while any is insignificant.
+        while effect == Effect::JointOffsets && problem.joints.len() > 1 {
+            let Ok(fit) = &summary else { break };
+            let weakest = fit
+                .params
+                .iter()
+                .enumerate()
+                .map(|(k, (_, value, se))| (k, value.abs() / se.max(1e-300)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            match weakest {
+                Some((k, z)) if z < 3.0 => {
+                    problem.joints.remove(k);
+                    theta = problem.fit(Some(effect), None);
+                    summary = problem.summarise(Some(effect), &theta, sigma);
+                }
+                _ => break,
+            }
+        }
+        match summary {
             Err(reason) => alternatives.push(Alternative {
                 name: effect.name(),
                 fit: None,

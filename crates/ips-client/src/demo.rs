@@ -25,6 +25,12 @@ pub struct DemoArgs {
     /// Simulated robot (ur10 or ur10e; iiwa14 needs the FRI emulation, not built yet).
     #[arg(long, default_value = "ur10")]
     pub robot: String,
+    /// An effect the simulated cell has and the model does not declare: none, probe_radius
+    /// (3.4 mm ball, 3 mm declared), tcp_offset (TCP 2.3 mm off), part_scale (part 0.4% larger
+    /// than its model), joint_offsets (encoder offsets of 1-2 mrad). With an effect the demo
+    /// takes 16 tilted touches and runs the diagnosis.
+    #[arg(long, default_value = "none")]
+    pub effect: String,
     /// Print one JSON document instead of text.
     #[arg(long)]
     pub json: bool,
@@ -33,6 +39,14 @@ pub struct DemoArgs {
 #[derive(Debug, Serialize)]
 pub struct DemoOutput {
     pub robot: String,
+    /// The effect the simulated cell had.
+    pub effect: String,
+    /// The diagnosis of the residual: verdict, effect found and its parameters.
+    pub diagnosis: Value,
+    /// Pose error after modelling the diagnosed effect (equal to the aligned error when none
+    /// was applied), m and rad.
+    pub pose_error_after_diagnosis_m: f64,
+    pub pose_error_after_diagnosis_rad: f64,
     pub inspections: usize,
     /// Distance between the aligned and the true part position, m.
     pub pose_error_m: f64,
@@ -246,12 +260,39 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     let journal = folder.join("inspections.journal");
     let _ = std::fs::remove_file(&journal);
     let chain = robot.chain().map_err(BadInput::new)?;
-    let targets = crate::probing::joint_targets(
+    // The cell as it physically is; the session above declares the nominal tool and part.
+    let mut true_tcp = tcp;
+    let (mut true_radius, mut true_scale, mut encoder_offsets) =
+        (tip_radius, 1.0, vec![0.0; chain.dof()]);
+    match args.effect.as_str() {
+        "none" => {}
+        "probe_radius" => true_radius = 0.0034,
+        "tcp_offset" => {
+            true_tcp.translation.vector += nalgebra::Vector3::new(0.0015, -0.001, 0.0015)
+        }
+        "part_scale" => true_scale = 1.004,
+        "joint_offsets" => encoder_offsets = vec![0.0, 0.0015, -0.002, 0.001, 0.0, 0.0],
+        other => {
+            return Err(BadInput(format!(
+                "--effect '{other}': expected none, probe_radius, tcp_offset, part_scale or joint_offsets"
+            )));
+        }
+    }
+    let touches = if args.effect == "none" {
+        crate::probing::step_block_table_touches()
+            .into_iter()
+            .map(|(p, n)| (p, n, 0.0))
+            .collect()
+    } else {
+        crate::probing::step_block_diagnosis_touches()
+    };
+    let targets = crate::probing::tilted_joint_targets(
         &chain,
         &truth,
-        &tcp,
-        tip_radius,
-        &crate::probing::step_block_table_touches(),
+        &true_tcp,
+        true_radius,
+        true_scale,
+        &touches,
         &sim_robot_home(),
     )
     .map_err(|error| BadInput(format!("cannot plan the touches: {error}")))?;
@@ -318,6 +359,19 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     let control = zmq_socket(&context, zmq::REQ, &sim.endpoint("control")?)?;
     let sub = zmq_socket(&context, zmq::SUB, &bridge_pub)?;
     sub.set_subscribe(b"").map_err(BadInput::new)?;
+    if encoder_offsets.iter().any(|o| *o != 0.0) {
+        control
+            .send(
+                json!({"command": "effects", "joint_offsets": encoder_offsets})
+                    .to_string()
+                    .as_bytes(),
+                0,
+            )
+            .map_err(BadInput::new)?;
+        let _ = control
+            .recv_bytes(0)
+            .map_err(|_| BadInput("sim-robot control: no reply".to_owned()))?;
+    }
 
     let deadline = Instant::now() + Duration::from_secs(20);
     loop {
@@ -365,10 +419,11 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
                 .recv_bytes(0)
                 .map_err(|_| BadInput("the hardware-state stream went silent".to_owned()))?;
             let state: Value = serde_json::from_slice(&bytes).map_err(BadInput::new)?;
+            // The stream carries what the encoders say: the true angle plus any offset.
             let at_touch = state["body"]["position"].as_array().is_some_and(|p| {
                 p.iter()
-                    .zip(q)
-                    .all(|(a, b)| a.as_f64().is_some_and(|a| (a - b).abs() < 1e-9))
+                    .zip(q.iter().zip(&encoder_offsets))
+                    .all(|(a, (b, o))| a.as_f64().is_some_and(|a| (a - b - o).abs() < 1e-9))
             });
             seen_after = match (seen_after, at_touch) {
                 (None, true) => Some(0),
@@ -391,6 +446,12 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         ));
     }
     let aligned = request(&client, json!({"command": "align"}), "align")?;
+    let saved = folder.join("captured.json");
+    let _ = request(
+        &client,
+        json!({"command": "save", "path": saved.display().to_string()}),
+        "save",
+    )?;
     let _ = request(&client, json!({"command": "stop"}), "stop");
     for child in [&mut sim, &mut bridge, &mut service] {
         child.check_alive()?;
@@ -398,6 +459,10 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     for child in [service, bridge, sim] {
         child.terminate();
     }
+    let diagnosis = crate::diagnose::run(&crate::diagnose::DiagnoseArgs {
+        session: saved,
+        json: true,
+    })?;
     let _ = std::fs::remove_dir_all(&folder);
     if aligned["body"]["ok"] != true {
         return Err(BadInput(format!(
@@ -421,8 +486,25 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     };
     let (pose_error_m, pose_error_rad) = error(&found);
     let (nominal_error_m, nominal_error_rad) = error(&nominal);
+    let after = &diagnosis.pose_after;
+    let after_pose = isometry_from_xyz_rpy(
+        std::array::from_fn(|i| after["xyz"][i].as_f64().unwrap_or(f64::NAN)),
+        std::array::from_fn(|i| after["rpy"][i].as_f64().unwrap_or(f64::NAN)),
+    );
+    let (pose_error_after_diagnosis_m, pose_error_after_diagnosis_rad) = error(&after_pose);
     Ok(DemoOutput {
         robot: robot.name().to_owned(),
+        effect: args.effect.clone(),
+        diagnosis: json!({
+            "verdict": diagnosis.verdict,
+            "effect": diagnosis.effect,
+            "explanation": diagnosis.explanation,
+            "alternatives": diagnosis.alternatives,
+            "before": diagnosis.before,
+            "after": diagnosis.after,
+        }),
+        pose_error_after_diagnosis_m,
+        pose_error_after_diagnosis_rad,
         inspections: targets.len(),
         pose_error_m,
         pose_error_rad,
@@ -442,7 +524,7 @@ fn sim_robot_home() -> Vec<f64> {
 
 impl DemoOutput {
     pub fn to_text(&self) -> String {
-        format!(
+        let mut text = format!(
             "{} touches on the {} aligned the part:\n  nominal pose error: {:8.3} mm  {:8.3} mrad\n  aligned pose error: {:8.5} mm  {:8.5} mrad\n  residual rms {:.4} mm, alignment {:.1} ms\n",
             self.inspections,
             self.robot,
@@ -452,6 +534,29 @@ impl DemoOutput {
             self.pose_error_rad * 1e3,
             self.rms_m * 1e3,
             self.align_time_s * 1e3
-        )
+        );
+        text += &format!(
+            "simulated effect: {}; diagnosis: {} ({})\n",
+            self.effect,
+            self.diagnosis["verdict"].as_str().unwrap_or("?"),
+            self.diagnosis["explanation"].as_str().unwrap_or("")
+        );
+        if let Some(params) = self.diagnosis["effect"]["params"].as_object() {
+            for (key, value) in params {
+                text += &format!(
+                    "  {key} = {:.4e} +- {:.1e}\n",
+                    value.as_f64().unwrap_or(f64::NAN),
+                    self.diagnosis["effect"]["stderr"][key]
+                        .as_f64()
+                        .unwrap_or(f64::NAN)
+                );
+            }
+        }
+        text += &format!(
+            "  pose error after modelling it: {:8.5} mm  {:8.5} mrad\n",
+            self.pose_error_after_diagnosis_m * 1e3,
+            self.pose_error_after_diagnosis_rad * 1e3
+        );
+        text
     }
 }

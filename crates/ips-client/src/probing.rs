@@ -23,6 +23,31 @@ pub fn step_block_table_touches() -> Vec<(Point3<f64>, Vector3<f64>)> {
     ]
 }
 
+/// Sixteen touches for diagnosis (enough to fit the pose plus six joint offsets), with probe
+/// tilts up to 23 degrees so that a ball-radius change and a TCP shift look different:
+/// (point, outward normal, tilt in rad).
+pub fn step_block_diagnosis_touches() -> Vec<(Point3<f64>, Vector3<f64>, f64)> {
+    let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+    vec![
+        (Point3::new(0.05, 0.05, 0.15), z, 0.0),
+        (Point3::new(0.17, 0.06, 0.15), z, 0.35),
+        (Point3::new(0.1, 0.16, 0.15), z, 0.2),
+        (Point3::new(0.03, 0.17, 0.15), z, 0.4),
+        (Point3::new(0.18, 0.18, 0.15), z, 0.1),
+        (Point3::new(0.06, 0.0, 0.09), -y, 0.1),
+        (Point3::new(0.24, 0.0, 0.04), -y, 0.3),
+        (Point3::new(0.12, 0.0, 0.12), -y, 0.0),
+        (Point3::new(0.02, 0.0, 0.03), -y, 0.25),
+        (Point3::new(0.0, 0.1, 0.08), -x, 0.25),
+        (Point3::new(0.0, 0.04, 0.12), -x, 0.0),
+        (Point3::new(0.0, 0.17, 0.03), -x, 0.15),
+        (Point3::new(0.26, 0.12, 0.07), z, 0.15),
+        (Point3::new(0.2, 0.06, 0.11), x, 0.2),
+        (Point3::new(0.3, 0.15, 0.035), x, 0.0),
+        (Point3::new(0.3, 0.03, 0.02), x, 0.3),
+    ]
+}
+
 /// Joint vectors touching each point of `touches` on the part at `base_from_part`, each solved
 /// from the previous (so the arm moves little between touches).
 pub fn joint_targets(
@@ -33,11 +58,37 @@ pub fn joint_targets(
     touches: &[(Point3<f64>, Vector3<f64>)],
     seed: &[f64],
 ) -> Result<Vec<Vec<f64>>, IkError> {
+    let tilted: Vec<_> = touches.iter().map(|(p, n)| (*p, *n, 0.0)).collect();
+    tilted_joint_targets(
+        chain,
+        base_from_part,
+        flange_from_tcp,
+        tip_radius_m,
+        1.0,
+        &tilted,
+        seed,
+    )
+}
+
+/// As [`joint_targets`], with each probe tilted by its angle about a horizontal axis and the
+/// part scaled by `part_scale` about its origin (the real part may be larger than its model).
+pub fn tilted_joint_targets(
+    chain: &Chain,
+    base_from_part: &Isometry3<f64>,
+    flange_from_tcp: &Isometry3<f64>,
+    tip_radius_m: f64,
+    part_scale: f64,
+    touches: &[(Point3<f64>, Vector3<f64>, f64)],
+    seed: &[f64],
+) -> Result<Vec<Vec<f64>>, IkError> {
     let mut seed = seed.to_vec();
     let mut targets = Vec::with_capacity(touches.len());
-    for (point, normal) in touches {
-        let centre = base_from_part * (point + normal * tip_radius_m);
-        let probe_axis = base_from_part.rotation * -normal;
+    for (point, normal, tilt) in touches {
+        let surface = Point3::from(point.coords * part_scale);
+        let centre = base_from_part * (surface + normal * tip_radius_m);
+        let normal_base = base_from_part.rotation * normal;
+        let tilt_axis = normal_base.cross(&Vector3::new(0.3, 1.0, 0.2)).normalize();
+        let probe_axis = UnitQuaternion::from_scaled_axis(tilt_axis * *tilt) * -normal_base;
         // Probe z along the approach; x roughly along base x so the wrist stays tidy.
         let helper = if probe_axis.x.abs() > 0.9 {
             Vector3::y()

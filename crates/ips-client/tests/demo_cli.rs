@@ -53,3 +53,49 @@ fn demo_refuses_robots_it_cannot_simulate() {
             .contains("FRI emulation and back end are not built yet")
     );
 }
+
+/// The simulated cell carries an undeclared effect; the demo's diagnosis must name it, estimate
+/// it within 3 standard errors and leave the part pose better than plain alignment.
+fn demo_with(effect: &str, parameter: &str, truth: f64) {
+    ensure_services_built();
+    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(["demo", "--effect", effect, "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let diagnosis = &result["diagnosis"];
+    assert_eq!(diagnosis["verdict"], "effect", "{diagnosis}");
+    assert_eq!(diagnosis["effect"]["name"], effect);
+    let estimate = diagnosis["effect"]["params"][parameter].as_f64().unwrap();
+    let stderr = diagnosis["effect"]["stderr"][parameter].as_f64().unwrap();
+    assert!(
+        (estimate - truth).abs() < 3.0 * stderr,
+        "{estimate} +- {stderr}, truth {truth}"
+    );
+    let before = result["pose_error_m"].as_f64().unwrap();
+    let after = result["pose_error_after_diagnosis_m"].as_f64().unwrap();
+    assert!(
+        after < before,
+        "pose error {after} after modelling, {before} before"
+    );
+}
+
+#[test]
+fn demo_finds_an_undeclared_ball_radius() {
+    demo_with("probe_radius", "delta_radius_m", 0.0004);
+}
+
+#[test]
+fn demo_finds_an_undeclared_part_scale() {
+    demo_with("part_scale", "scale_minus_one", 0.004);
+}
+
+#[test]
+fn demo_finds_an_undeclared_tcp_offset() {
+    demo_with("tcp_offset", "dz_m", 0.0015);
+}

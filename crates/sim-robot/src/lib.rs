@@ -8,11 +8,15 @@
 //! | request (JSON) | reply |
 //! | --- | --- |
 //! | `{"command":"status"}` | `{"ok":true,"time":s,"clients":n,"paused":b,"robot":"ur10"}` |
-//! | `{"command":"truth"}` | `{"ok":true,"time":s,"q":[...]}` (now) |
-//! | `{"command":"truth_at","time":s}` | `{"ok":true,"time":s,"q":[...],"qd":[...]}` |
+//! | `{"command":"truth"}` | `{"ok":true,"time":s,"q":[...],"reported_q":[...]}` (now) |
+//! | `{"command":"truth_at","time":s}` | `{"ok":true,"time":s,"q":[...],"qd":[...],"reported_q":[...]}` |
+//!
+//! `q` is where the joints really are; `reported_q` what the controller streams (they differ by
+//! the encoder offsets of `effects`).
 //! | `{"command":"motion","motion":{"kind":"hold","q":[...]}}` or `{"kind":"sine",...}` | `{"ok":true}` |
 //! | `{"command":"pause"}` / `{"command":"resume"}` | stop / restart sending data (connections stay) |
 //! | `{"command":"drop"}` | close every RTDE connection (clients may reconnect) |
+//! | `{"command":"effects","joint_offsets":[...]}` | encoder offsets (rad) the robot reports on top of its true joint angles, undeclared to everyone else |
 //!
 //! Errors reply `{"ok":false,"reason":"..."}`.
 //!
@@ -63,6 +67,9 @@ pub enum SimError {
 /// One controller sample.
 pub(crate) struct Sample {
     time_s: f64,
+    /// Where the joints are.
+    true_q: Vec<f64>,
+    /// What the encoders say.
     q: Vec<f64>,
     qd: Vec<f64>,
     tcp_pose: [f64; 6],
@@ -98,6 +105,8 @@ pub(crate) struct Shared {
     pub(crate) controller_version: [u32; 4],
     started: Instant,
     motion: Mutex<Motion>,
+    /// Encoder offsets added to the reported joint angles (an undeclared effect).
+    encoder_offsets: Mutex<Vec<f64>>,
     chain: Chain,
     limits: Vec<(f64, f64)>,
 }
@@ -113,13 +122,22 @@ impl Shared {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .clone();
-        let q = motion.position(time_s);
+        let offsets = self
+            .encoder_offsets
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        let true_q = motion.position(time_s);
+        // The controller only knows its encoders: it reports, and computes its TCP from, the
+        // offset angles.
+        let q: Vec<f64> = true_q.iter().zip(&offsets).map(|(q, o)| q + o).collect();
         let qd = motion.velocity(time_s);
         let pose: Isometry3<f64> = self.chain.forward_unchecked(&q);
         let t = pose.translation.vector;
         let r = pose.rotation.scaled_axis();
         Sample {
             time_s,
+            true_q,
             q,
             qd,
             tcp_pose: [t.x, t.y, t.z, r.x, r.y, r.z],
@@ -207,6 +225,7 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         motion: Mutex::new(Motion::Hold {
             q: home(config.robot),
         }),
+        encoder_offsets: Mutex::new(vec![0.0; home(config.robot).len()]),
         chain,
         limits,
     });
@@ -286,12 +305,12 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
         }),
         Some("truth") => {
             let sample = shared.sample();
-            json!({"ok": true, "time": sample.time_s, "q": sample.q, "qd": sample.qd})
+            json!({"ok": true, "time": sample.time_s, "q": sample.true_q, "qd": sample.qd, "reported_q": sample.q})
         }
         Some("truth_at") => match request["time"].as_f64() {
             Some(time) if time.is_finite() => {
                 let sample = shared.sample_at(time);
-                json!({"ok": true, "time": time, "q": sample.q, "qd": sample.qd})
+                json!({"ok": true, "time": time, "q": sample.true_q, "qd": sample.qd, "reported_q": sample.q})
             }
             _ => failure("truth_at needs a finite 'time' in s"),
         },
@@ -305,6 +324,26 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
             },
             Err(error) => failure(format!("bad motion: {error}")),
         },
+        Some("effects") => {
+            let offsets: Option<Vec<f64>> =
+                serde_json::from_value(request["joint_offsets"].clone()).ok();
+            match offsets {
+                Some(offsets)
+                    if offsets.len() == shared.limits.len()
+                        && offsets.iter().all(|o| o.is_finite() && o.abs() <= 0.1) =>
+                {
+                    *shared
+                        .encoder_offsets
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner()) = offsets;
+                    json!({"ok": true})
+                }
+                _ => failure(format!(
+                    "effects needs 'joint_offsets': {} finite values within +-0.1 rad",
+                    shared.limits.len()
+                )),
+            }
+        }
         Some("pause") => {
             shared.paused.store(true, Ordering::Relaxed);
             json!({"ok": true})
