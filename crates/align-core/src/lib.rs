@@ -15,6 +15,7 @@ pub mod io;
 pub mod kinematics;
 pub mod pose;
 pub mod registration;
+pub mod rng;
 pub mod robots;
 pub mod tool;
 pub mod trials;

@@ -13,6 +13,7 @@ use nalgebra::{Isometry3, Matrix6, Vector6};
 use super::chain::Chain;
 use super::error::KinematicsError;
 use crate::pose::rotation_error;
+use crate::rng::SplitMix64;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct IkOptions {
@@ -93,7 +94,7 @@ impl Chain {
         if !target_finite {
             return Err(IkError::NonFiniteTarget);
         }
-        let mut rng = SplitMix64(options.random_seed);
+        let mut rng = SplitMix64::new(options.random_seed);
         let mut best: Option<Attempt> = None;
         let mut iterations = 0;
         for attempt in 0..options.max_attempts.max(1) {
@@ -148,7 +149,7 @@ impl Chain {
                 };
                 let lower = if lower.is_finite() { lower } else { -1.0 };
                 let upper = if upper.is_finite() { upper } else { 1.0 };
-                lower + (upper - lower) * rng.next_unit()
+                lower + (upper - lower) * rng.uniform()
             })
             .collect()
     }
@@ -226,23 +227,4 @@ struct Attempt {
     rotation_error_rad: f64,
     cost: f64,
     iterations: usize,
-}
-
-/// Small deterministic generator for restart seeds (Steele, Lea and Flood's SplitMix64); the
-/// library stays free of an RNG dependency and its results are reproducible across platforms.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn next_unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
