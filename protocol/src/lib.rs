@@ -325,12 +325,12 @@ impl HwStateBody {
 /// thesis's envelope with `"type": "request"`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ServiceRequestBody {
-    /// status, start, stop, get, list, remove, reset, align, save.
+    /// status, start, stop, get, list, remove, reset, align, save, load.
     pub command: String,
     /// Inspection ids (remove).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ids: Vec<String>,
-    /// A file (save).
+    /// A session file (save, load).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub path: Option<String>,
 }

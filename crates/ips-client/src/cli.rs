@@ -54,6 +54,10 @@ pub enum Command {
     Remove(RemoveArgs),
     /// Remove every inspection.
     Reset(ServiceArgs),
+    /// Write the service's session (robot, tool, part, inspections) to a file.
+    Save(PathArgs),
+    /// Replace the service's inspections with those of a session file.
+    Load(PathArgs),
     /// The service's state: mirroring, inspections, age of the latest joint state.
     Status(ServiceArgs),
     /// The whole loop on the simulator: sim-robot, robot-bridge and the service as child
@@ -95,6 +99,14 @@ pub struct ServiceArgs {
     /// Print the reply's JSON document.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct PathArgs {
+    /// Session file, as the service sees the path.
+    pub path: String,
+    #[command(flatten)]
+    pub service: ServiceArgs,
 }
 
 #[derive(Debug, Args)]

@@ -1,4 +1,4 @@
-//! `ips start|stop|get|list|remove|reset|status`: one request to a running `ips serve`.
+//! `ips start|stop|get|list|remove|reset|save|load|status`: one request to a running `ips serve`.
 
 use serde_json::Value;
 
@@ -8,6 +8,16 @@ use crate::cli::ServiceArgs;
 /// Sends one request and returns the reply for printing (text or `--json`); a refused request
 /// is bad input (exit 2) with the service's reason.
 pub fn call(command: &str, ids: Vec<String>, args: &ServiceArgs) -> Result<String, BadInput> {
+    call_with_path(command, ids, None, args)
+}
+
+/// As [`call`], with a session file path (save, load).
+pub fn call_with_path(
+    command: &str,
+    ids: Vec<String>,
+    path: Option<String>,
+    args: &ServiceArgs,
+) -> Result<String, BadInput> {
     let context = zmq::Context::new();
     let socket = context.socket(zmq::REQ).map_err(BadInput::new)?;
     socket.set_linger(0).map_err(BadInput::new)?;
@@ -18,6 +28,7 @@ pub fn call(command: &str, ids: Vec<String>, args: &ServiceArgs) -> Result<Strin
         .map_err(|error| BadInput(format!("{}: {error}", args.service)))?;
     let mut request = protocol::service_request(command);
     request.body.ids = ids;
+    request.body.path = path;
     let text = protocol::to_json(&request).map_err(BadInput::new)?;
     socket.send(text.as_bytes(), 0).map_err(BadInput::new)?;
     let reply = socket.recv_bytes(0).map_err(|_| {

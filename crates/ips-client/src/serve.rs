@@ -6,7 +6,8 @@
 //! latest sample as an inspection, refused when the sample is older than `max_sample_age_s`
 //! (the stream stalled or the bridge lost its robot) or the tool moves faster than
 //! `max_tool_speed_m_s` (a touch is taken at rest). Every change to the inspection list is
-//! appended to a journal and flushed to disk before the reply, so an acknowledged inspection
+//! appended to a journal and flushed to disk before the reply (`load` replaces the list with a
+//! session file's inspections in one entry), so an acknowledged inspection
 //! survives a crash; a restarted service replays the journal.
 //!
 //! Requests are served in turn by one thread that owns the REP socket; an `align` runs in that
@@ -121,6 +122,17 @@ fn replay(path: &Path, inspections: &mut Vec<Inspection>) -> Result<u64, String>
                 inspections.retain(|i| !ids.contains(&i.id));
             }
             Some("reset") => inspections.clear(),
+            Some("load") => {
+                if let Ok(loaded) =
+                    serde_json::from_value::<Vec<Inspection>>(entry["inspections"].clone())
+                {
+                    highest = loaded
+                        .iter()
+                        .filter_map(|i| i.id.parse().ok())
+                        .fold(highest, u64::max);
+                    *inspections = loaded;
+                }
+            }
             _ => {}
         }
     }
@@ -364,14 +376,54 @@ impl Service {
             "align" => self.align(),
             "save" => {
                 let path = request.body.path.ok_or("save needs a 'path'")?;
-                let file = self.session_file();
+                let mut file = self.session_file();
+                // The file may land anywhere: paths relative to the template would break.
+                let absolute = |relative: &str| {
+                    let joined = self.state.folder.join(relative);
+                    joined
+                        .canonicalize()
+                        .unwrap_or(joined)
+                        .display()
+                        .to_string()
+                };
+                file.robot.urdf = absolute(&file.robot.urdf);
+                file.part.mesh = absolute(&file.part.mesh);
+                for dir in file.robot.package_dirs.values_mut() {
+                    *dir = absolute(dir);
+                }
                 let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
                 std::fs::write(&path, text + "\n")
                     .map_err(|e| format!("cannot write '{path}': {e}"))?;
                 Ok(json!({"path": path, "inspections": file.inspections.len()}))
             }
+            "load" => {
+                let path = request.body.path.ok_or("load needs a 'path'")?;
+                let text = std::fs::read_to_string(&path)
+                    .map_err(|e| format!("cannot read '{path}': {e}"))?;
+                let file: SessionFile =
+                    serde_json::from_str(&text).map_err(|e| format!("session '{path}': {e}"))?;
+                if file.format != crate::session::FORMAT {
+                    return Err(format!(
+                        "session '{path}': format '{}' is not '{}'",
+                        file.format,
+                        crate::session::FORMAT
+                    ));
+                }
+                // One journal entry, so a crash leaves either the old list or the new one.
+                self.state
+                    .journal(json!({"op": "load", "inspections": file.inspections}))?;
+                self.state.next_id = file
+                    .inspections
+                    .iter()
+                    .filter_map(|i| i.id.parse().ok())
+                    .max()
+                    .unwrap_or(0)
+                    + 1;
+                self.state.inspections = file.inspections;
+                Ok(json!({"inspections": self.state.inspections.len()}))
+            }
             other => Err(format!(
-                "unknown command '{other}' (expected status, start, stop, get, list, remove, reset, align or save)"
+                "unknown command '{other}' (expected status, start, stop, get, list, remove, reset, align, save or load)"
             )),
         }
     }

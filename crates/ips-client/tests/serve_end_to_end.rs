@@ -175,6 +175,34 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         assert!((got - want).abs() < 1e-6, "xyz[{axis}]: {got} vs {want}");
     }
 
+    // Save, reset, load: the list comes back from the file.
+    let saved = folder.join("saved.json");
+    let reply = call(
+        &client,
+        json!({"command": "save", "path": saved.to_str().unwrap()}),
+    );
+    assert_eq!(reply["data"]["inspections"], 9, "{reply}");
+    assert_eq!(
+        call(&client, json!({"command": "reset"}))["data"]["inspections"],
+        0
+    );
+    let reply = call(
+        &client,
+        json!({"command": "load", "path": saved.to_str().unwrap()}),
+    );
+    assert_eq!(reply["data"]["inspections"], 9, "{reply}");
+    let missing = call(
+        &client,
+        json!({"command": "load", "path": "/no/such/session.json"}),
+    );
+    assert!(
+        missing["reason"]
+            .as_str()
+            .unwrap()
+            .starts_with("cannot read '/no/such/session.json'"),
+        "{missing}"
+    );
+
     // Remove and bad requests.
     let removed = call(&client, json!({"command": "remove", "ids": ["9"]}));
     assert_eq!(removed["data"]["inspections"], 8);

@@ -59,6 +59,18 @@ fn run(command: Command) -> Result<String, BadInput> {
         Command::List(args) => ips_client::client::call("list", Vec::new(), &args),
         Command::Reset(args) => ips_client::client::call("reset", Vec::new(), &args),
         Command::Status(args) => ips_client::client::call("status", Vec::new(), &args),
+        Command::Save(args) => ips_client::client::call_with_path(
+            "save",
+            Vec::new(),
+            Some(args.path.clone()),
+            &args.service,
+        ),
+        Command::Load(args) => ips_client::client::call_with_path(
+            "load",
+            Vec::new(),
+            Some(args.path.clone()),
+            &args.service,
+        ),
         Command::Remove(args) => {
             ips_client::client::call("remove", args.ids.clone(), &args.service)
         }
