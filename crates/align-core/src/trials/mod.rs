@@ -104,7 +104,7 @@ pub fn run_psa_trials(
     deltas_m: &[f64],
     trials: usize,
     seed: u64,
-    mut on_trial: impl FnMut(f64, usize),
+    on_trial: impl FnMut(f64, usize),
 ) -> Vec<TrialRow> {
     let base_from_part = trial_pose();
     let touches = plan_touches(part, &base_from_part, setup);
@@ -116,6 +116,25 @@ pub fn run_psa_trials(
         tip_radius_m: setup.tip_radius_m,
         ..options.clone()
     };
+    run_trials(part, deltas_m, trials, seed, on_trial, |start, _| {
+        align_touches(&target, &touches, start, &options)
+            .ok()
+            .map(|r| (r.base_from_part, r.iterations, r.is_ambiguous()))
+    })
+}
+
+/// The seeded trial loop shared by PSA and PCA: `align(start, delta)` returns the final pose,
+/// the iterations and whether the result was ambiguous, or `None` when it refused (the part
+/// then stays where it started).
+fn run_trials(
+    part: &TestPart,
+    deltas_m: &[f64],
+    trials: usize,
+    seed: u64,
+    mut on_trial: impl FnMut(f64, usize),
+    mut align: impl FnMut(&Isometry3<f64>, f64) -> Option<(Isometry3<f64>, usize, bool)>,
+) -> Vec<TrialRow> {
+    let base_from_part = trial_pose();
     let radius_m = part.mesh.radius_m();
     deltas_m
         .iter()
@@ -135,17 +154,10 @@ pub fn run_psa_trials(
                 let displacement = random_displacement(&mut rng, delta_m, radius_m);
                 let start = displace_about_centroid(&base_from_part, &part.mesh, &displacement);
                 let started = Instant::now();
-                let result = align_touches(&target, &touches, &start, &options);
+                let result = align(&start, delta_m);
                 let elapsed = started.elapsed().as_secs_f64();
-                let (error, iterations, ambiguous) = match &result {
-                    Ok(result) => (
-                        pose_distance(&result.base_from_part, &base_from_part, radius_m),
-                        result.iterations,
-                        result.is_ambiguous(),
-                    ),
-                    // A refused alignment leaves the part where it started.
-                    Err(_) => (pose_distance(&start, &base_from_part, radius_m), 0, false),
-                };
+                let (pose, iterations, ambiguous) = result.unwrap_or((start, 0, false));
+                let error = pose_distance(&pose, &base_from_part, radius_m);
                 if error < SUCCESS_THRESHOLD_M {
                     row.succeeded += 1;
                 } else {
@@ -183,52 +195,12 @@ pub fn run_pca_trials(
     deltas_m: &[f64],
     trials: usize,
     seed: u64,
-    mut on_trial: impl FnMut(f64, usize),
+    on_trial: impl FnMut(f64, usize),
 ) -> Vec<TrialRow> {
-    let base_from_part = trial_pose();
-    let cloud = scan_part(&part.mesh, &base_from_part, scan);
-    let radius_m = part.mesh.radius_m();
-    deltas_m
-        .iter()
-        .map(|&delta_m| {
-            let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
-            let mut row = TrialRow {
-                delta_m,
-                succeeded: 0,
-                failed: 0,
-                ambiguous: 0,
-                mean_iterations: 0.0,
-                mean_error_m: 0.0,
-                mean_time_s: 0.0,
-            };
-            for trial in 0..trials {
-                let displacement = random_displacement(&mut rng, delta_m, radius_m);
-                let start = displace_about_centroid(&base_from_part, &part.mesh, &displacement);
-                let started = Instant::now();
-                let result = align_cloud(&part.mesh, &cloud, &start, delta_m, options);
-                let elapsed = started.elapsed().as_secs_f64();
-                let (error, iterations) = match &result {
-                    Ok(result) => (
-                        pose_distance(&result.base_from_part, &base_from_part, radius_m),
-                        result.iterations,
-                    ),
-                    Err(_) => (pose_distance(&start, &base_from_part, radius_m), 0),
-                };
-                if error < SUCCESS_THRESHOLD_M {
-                    row.succeeded += 1;
-                } else {
-                    row.failed += 1;
-                }
-                row.mean_iterations += iterations as f64;
-                row.mean_error_m += error;
-                row.mean_time_s += elapsed;
-                on_trial(delta_m, trial);
-            }
-            let count = trials.max(1) as f64;
-            row.mean_iterations /= count;
-            row.mean_error_m /= count;
-            row.mean_time_s /= count;
-            row
-        })
-        .collect()
+    let cloud = scan_part(&part.mesh, &trial_pose(), scan);
+    run_trials(part, deltas_m, trials, seed, on_trial, |start, delta_m| {
+        align_cloud(&part.mesh, &cloud, start, delta_m, options)
+            .ok()
+            .map(|r| (r.base_from_part, r.iterations, false))
+    })
 }
