@@ -32,12 +32,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let tcp = isometry_from_xyz_rpy([0.0, 0.0, 0.15], [0.0, 0.0, 0.0]);
     let tip_radius = 0.003;
     let chain = ShippedRobot::Ur10.chain()?;
-    let targets = ips_client::probing::joint_targets(
+    let targets = align_core::trials::probing::joint_targets(
         &chain,
         &truth,
         &tcp,
         tip_radius,
-        &ips_client::probing::step_block_table_touches(),
+        &align_core::trials::probing::step_block_table_touches(),
         &[0.0, -1.57, 1.57, -1.57, -1.57, 0.0],
     )?;
     let inspections: Vec<Inspection> = targets
@@ -87,12 +87,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     // The same cell touched with a 3.4 mm ball while the session still declares 3 mm: an
     // undeclared effect for `ips diagnose` to find.
-    let bigger_ball = ips_client::probing::joint_targets(
+    let bigger_ball = align_core::trials::probing::joint_targets(
         &chain,
         &truth,
         &tcp,
         0.0034,
-        &ips_client::probing::step_block_table_touches(),
+        &align_core::trials::probing::step_block_table_touches(),
         &[0.0, -1.57, 1.57, -1.57, -1.57, 0.0],
     )?;
     let mut wrong_radius = session.clone();

@@ -279,14 +279,14 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         }
     }
     let touches = if args.effect == "none" {
-        crate::probing::step_block_table_touches()
+        align_core::trials::probing::step_block_table_touches()
             .into_iter()
             .map(|(p, n)| (p, n, 0.0))
             .collect()
     } else {
-        crate::probing::step_block_diagnosis_touches()
+        align_core::trials::probing::step_block_diagnosis_touches()
     };
-    let targets = crate::probing::tilted_joint_targets(
+    let targets = align_core::trials::probing::tilted_joint_targets(
         &chain,
         &truth,
         &true_tcp,

@@ -9,7 +9,6 @@ pub mod client;
 pub mod demo;
 pub mod diagnose;
 pub mod fk;
-pub mod probing;
 pub mod serve;
 pub mod session;
 pub mod trials;

@@ -1,8 +1,8 @@
 //! Planning touches on a part: where to touch, and the joint configuration that puts the probe's
-//! ball on each point with the probe along the inward normal. Used by the example data and by
-//! `ips demo` to drive the simulated robot.
+//! ball on each point with the probe along the inward normal. Used by the example data, `ips demo`
+//! (to drive the simulated robot) and the diagnosis tests.
 
-use align_core::kinematics::{Chain, IkError, IkOptions};
+use crate::kinematics::{Chain, IkError, IkOptions};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 /// Touches on the step block (part frame: point on the surface, outward normal) for a part on a
