@@ -183,6 +183,19 @@ pub struct StatusBody {
     pub reconnects: u64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// Controller samples never received, counted from gaps in the controller's sequence
+    /// counter (FRI) within a session.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller_samples_missed: Option<u64>,
+    /// The FRI session state the controller reports (e.g. "MONITORING_READY").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub session_state: Option<String>,
+    /// The FRI connection quality the controller reports ("POOR" .. "EXCELLENT").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connection_quality: Option<String>,
+    /// Datagrams dropped as not from the controller or not its messages (FRI).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rejected_datagrams: Option<u64>,
 }
 
 pub type Status = Envelope<StatusBody>;

@@ -44,15 +44,10 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         robot: ShippedRobot::Ur10,
         rtde_listen: "127.0.0.1:0".to_owned(),
         control: "tcp://127.0.0.1:*".to_owned(),
+        fri: sim_robot::FriSettings::default(),
     })
     .unwrap();
-    let port: u16 = sim
-        .rtde_address
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let port = sim.rtde_port().unwrap();
     let bridge = robot_bridge::start(&robot_bridge::Config {
         backend: robot_bridge::BackendKind::Ur,
         robot_host: "127.0.0.1".to_owned(),
@@ -261,15 +256,10 @@ fn a_bridge_restart_mid_session_is_recovered() {
         robot: ShippedRobot::Ur10,
         rtde_listen: "127.0.0.1:0".to_owned(),
         control: "tcp://127.0.0.1:*".to_owned(),
+        fri: sim_robot::FriSettings::default(),
     })
     .unwrap();
-    let port: u16 = sim
-        .rtde_address
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let port = sim.rtde_port().unwrap();
     let bridge_config = |rep: &str, publish: &str| robot_bridge::Config {
         backend: robot_bridge::BackendKind::Ur,
         robot_host: "127.0.0.1".to_owned(),

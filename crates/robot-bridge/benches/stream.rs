@@ -60,14 +60,10 @@ fn main() {
         robot: ShippedRobot::Ur10e,
         rtde_listen: "127.0.0.1:0".to_owned(),
         control: "tcp://127.0.0.1:*".to_owned(),
+        fri: sim_robot::FriSettings::default(),
     })
     .expect("sim-robot");
-    let port: u16 = sim
-        .rtde_address
-        .rsplit(':')
-        .next()
-        .and_then(|p| p.parse().ok())
-        .expect("port");
+    let port = sim.rtde_port().expect("port");
     let bridge = robot_bridge::start(&Config {
         backend: BackendKind::Ur,
         robot_host: "127.0.0.1".to_owned(),

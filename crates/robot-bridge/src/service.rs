@@ -11,7 +11,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use protocol::{Command, HwStateBody, RobotSide, StatusBody};
 
 use crate::BackendKind;
-use crate::backend::{Backend, Event, Sample};
+use crate::backend::{Backend, Event, LinkState, Sample};
 
 /// Requests larger than this are refused unread (a JSON instruction is ~100 bytes).
 pub const MAX_REQUEST_BYTES: usize = 64 * 1024;
@@ -28,8 +28,8 @@ pub struct Config {
 
 #[derive(Debug, thiserror::Error)]
 pub enum BridgeError {
-    #[error("the {0} back end is not built yet")]
-    Unsupported(&'static str),
+    #[error("cannot listen for FRI on UDP port {port}: {source}")]
+    Fri { port: u16, source: std::io::Error },
     #[error("socket {endpoint}: {source}")]
     Socket {
         endpoint: String,
@@ -44,6 +44,12 @@ struct ControllerState {
     last_sample: Option<Instant>,
     recent: std::collections::VecDeque<Instant>,
     reconnects: u64,
+    link: Option<LinkState>,
+    /// The controller's counter of the previous sample in this session, where it has one.
+    last_controller_seq: Option<u64>,
+    counts_controller_seq: bool,
+    controller_samples_missed: u64,
+    rejected_datagrams: Option<u64>,
 }
 
 struct Shared {
@@ -57,6 +63,8 @@ struct Shared {
 pub struct Handle {
     pub rep_endpoint: String,
     pub pub_endpoint: String,
+    /// Where the controller's datagrams are received (FRI), e.g. "udp://0.0.0.0:30200".
+    pub controller_endpoint: Option<String>,
     shutdown: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
 }
@@ -108,12 +116,24 @@ fn bind(
 
 /// Starts the bridge and returns once its sockets are bound.
 pub fn start(config: &Config) -> Result<Handle, BridgeError> {
-    let backend: Box<dyn Backend> = match config.backend {
-        BackendKind::Ur => Box::new(crate::backend::ur::UrBackend::new(
-            &config.robot_host,
-            config.rtde_port,
-        )),
-        BackendKind::Iiwa => return Err(BridgeError::Unsupported("iiwa (FRI)")),
+    let (backend, controller_endpoint): (Box<dyn Backend>, _) = match config.backend {
+        BackendKind::Ur => (
+            Box::new(crate::backend::ur::UrBackend::new(
+                &config.robot_host,
+                config.rtde_port,
+            )),
+            None,
+        ),
+        BackendKind::Iiwa => {
+            let backend =
+                crate::backend::iiwa::IiwaBackend::bind(&config.robot_host, config.fri_port)
+                    .map_err(|source| BridgeError::Fri {
+                        port: config.fri_port,
+                        source,
+                    })?;
+            let endpoint = format!("udp://{}", backend.local_address());
+            (Box::new(backend), Some(endpoint))
+        }
     };
     let context = zmq::Context::new();
     let (rep, rep_endpoint) = bind(&context, zmq::REP, &config.rep)?;
@@ -162,6 +182,7 @@ pub fn start(config: &Config) -> Result<Handle, BridgeError> {
     Ok(Handle {
         rep_endpoint,
         pub_endpoint,
+        controller_endpoint,
         shutdown: shutdown_flag,
         threads,
     })
@@ -199,11 +220,14 @@ fn backend_loop(
             continue;
         };
         let mut controller = shared.controller.lock().unwrap_or_else(|p| p.into_inner());
+        controller.rejected_datagrams = backend.rejected_datagrams().map(|(count, _)| count);
         match event {
             Event::Connecting => controller.state = "connecting",
             Event::Connected { .. } => {
                 controller.state = "connected";
                 controller.reason = None;
+                // A new session counts from its own start.
+                controller.last_controller_seq = None;
             }
             Event::Lost { reason } => {
                 if controller.state == "connected" {
@@ -211,8 +235,19 @@ fn backend_loop(
                 }
                 controller.state = "lost";
                 controller.reason = Some(reason);
+                controller.link = None;
+                controller.last_controller_seq = None;
             }
             Event::Sample(sample) => {
+                if let Some(seq) = sample.controller_seq {
+                    controller.counts_controller_seq = true;
+                    if let Some(previous) = controller.last_controller_seq {
+                        controller.controller_samples_missed +=
+                            seq.saturating_sub(previous).saturating_sub(1);
+                    }
+                    controller.last_controller_seq = Some(seq);
+                }
+                controller.link.clone_from(&sample.link);
                 let now = Instant::now();
                 controller.last_sample = Some(now);
                 controller.recent.push_back(now);
@@ -341,6 +376,20 @@ fn answer(request: &[u8], shared: &Shared, kind: BackendKind, robot_side: RobotS
                 published: shared.published.load(Ordering::Relaxed),
                 reconnects: controller.reconnects,
                 reason: controller.reason.clone(),
+                controller_samples_missed: controller
+                    .counts_controller_seq
+                    .then_some(controller.controller_samples_missed),
+                session_state: controller
+                    .link
+                    .as_ref()
+                    .and_then(|link| link.session_state)
+                    .map(str::to_owned),
+                connection_quality: controller
+                    .link
+                    .as_ref()
+                    .and_then(|link| link.quality)
+                    .map(str::to_owned),
+                rejected_datagrams: controller.rejected_datagrams,
             };
             protocol::to_json(&protocol::status(robot_side, body)).unwrap_or_default()
         }

@@ -51,15 +51,10 @@ fn cell(robot: ShippedRobot) -> Cell {
         robot,
         rtde_listen: "127.0.0.1:0".to_owned(),
         control: "tcp://127.0.0.1:*".to_owned(),
+        fri: sim_robot::FriSettings::default(),
     })
     .unwrap();
-    let port: u16 = sim
-        .rtde_address
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let port = sim.rtde_port().unwrap();
     let bridge = robot_bridge::start(&Config {
         backend: BackendKind::Ur,
         robot_host: "127.0.0.1".to_owned(),

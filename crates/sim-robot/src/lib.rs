@@ -20,12 +20,18 @@
 //!
 //! Errors reply `{"ok":false,"reason":"..."}`.
 //!
-//! The iiwa's FRI controller emulation is not built yet: `--robot iiwa14` is refused.
+//! iiwa mode emulates the Sunrise cabinet's FRI side ([`fri_server`]): a monitoring message to
+//! the client at `--fri-target` every send period, the session state and connection quality
+//! driven by how timely the client answers. There `status` also carries
+//! `"fri": {"session_state","quality","sequence","timely_answers","local_address"}`, `pause`
+//! stops sending and `drop` closes the FRI session (a new one starts from sequence 0 on a new
+//! source port).
 
+mod fri_server;
 pub mod motion;
 mod rtde_server;
 
-use std::net::TcpListener;
+use std::net::{SocketAddr, TcpListener, ToSocketAddrs, UdpSocket};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
@@ -40,16 +46,39 @@ use serde_json::{Value, json};
 #[derive(Debug, Clone)]
 pub struct Config {
     pub robot: ShippedRobot,
-    /// RTDE listen address, e.g. "127.0.0.1:30004" ("127.0.0.1:0" picks a free port).
+    /// RTDE listen address, e.g. "127.0.0.1:30004" ("127.0.0.1:0" picks a free port); UR only.
     pub rtde_listen: String,
     /// Control endpoint, e.g. "tcp://127.0.0.1:*".
     pub control: String,
+    /// The FRI link; iiwa only.
+    pub fri: FriSettings,
+}
+
+/// Where and how often the emulated iiwa controller sends FRI monitoring messages.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FriSettings {
+    /// The client's UDP address, e.g. "127.0.0.1:30200".
+    pub target: String,
+    /// 1-100 ms, as the Sunrise controller allows.
+    pub send_period_ms: u32,
+    /// The client answers every n-th message.
+    pub receive_multiplier: u32,
+}
+
+impl Default for FriSettings {
+    fn default() -> Self {
+        Self {
+            target: "127.0.0.1:30200".to_owned(),
+            send_period_ms: 5,
+            receive_multiplier: 1,
+        }
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
-    #[error("robot '{0}' is not simulated yet (FRI emulation for the iiwa is not built)")]
-    Unsupported(&'static str),
+    #[error("FRI: {0}")]
+    Fri(String),
     #[error("cannot listen for RTDE on {address}: {source}")]
     Listen {
         address: String,
@@ -109,6 +138,8 @@ pub(crate) struct Shared {
     encoder_offsets: Mutex<Vec<f64>>,
     chain: Chain,
     limits: Vec<(f64, f64)>,
+    /// The FRI link as the emulated controller sees it (iiwa mode).
+    fri: Mutex<Option<fri_server::LinkReport>>,
 }
 
 impl Shared {
@@ -152,7 +183,11 @@ impl Shared {
 /// A running simulator.
 #[derive(Debug)]
 pub struct SimHandle {
-    pub rtde_address: String,
+    /// The RTDE server's address (UR mode).
+    pub rtde_address: Option<String>,
+    /// The FRI controller's UDP address and its target (iiwa mode).
+    pub fri_address: Option<String>,
+    pub fri_target: Option<String>,
     pub control_endpoint: String,
     /// Wall-clock time of controller time zero, s since the Unix epoch (for latency figures).
     pub clock_origin_unix_s: f64,
@@ -170,6 +205,16 @@ impl std::fmt::Debug for SharedDebug {
 }
 
 impl SimHandle {
+    /// The RTDE server's port (UR mode).
+    pub fn rtde_port(&self) -> Option<u16> {
+        self.rtde_address
+            .as_deref()?
+            .rsplit(':')
+            .next()?
+            .parse()
+            .ok()
+    }
+
     /// Asks every thread to stop and waits for them.
     pub fn stop(mut self) {
         self.shared.0.shutdown.store(true, Ordering::Relaxed);
@@ -202,7 +247,8 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
     let (max_frequency_hz, controller_version) = match config.robot {
         ShippedRobot::Ur10 => (125.0, [3, 15, 7, 106]),
         ShippedRobot::Ur10e => (500.0, [5, 11, 6, 108]),
-        ShippedRobot::Iiwa14 => return Err(SimError::Unsupported("iiwa14")),
+        // Not an RTDE controller: these only set the RTDE server's figures, which is not run.
+        ShippedRobot::Iiwa14 => (1000.0 / f64::from(config.fri.send_period_ms.max(1)), [0; 4]),
     };
     let chain = config
         .robot
@@ -228,15 +274,19 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         encoder_offsets: Mutex::new(vec![0.0; home(config.robot).len()]),
         chain,
         limits,
+        fri: Mutex::new(None),
     });
-    let listener = TcpListener::bind(&config.rtde_listen).map_err(|source| SimError::Listen {
-        address: config.rtde_listen.clone(),
-        source,
-    })?;
-    let rtde_address = listener
-        .local_addr()
-        .map(|a| a.to_string())
-        .unwrap_or_else(|_| config.rtde_listen.clone());
+    let server = match config.robot {
+        ShippedRobot::Iiwa14 => Server::Fri(fri_link(&config.fri)?),
+        _ => {
+            let listener =
+                TcpListener::bind(&config.rtde_listen).map_err(|source| SimError::Listen {
+                    address: config.rtde_listen.clone(),
+                    source,
+                })?;
+            Server::Rtde(listener)
+        }
+    };
     let context = zmq::Context::new();
     let control_error = |source| SimError::Control {
         endpoint: config.control.clone(),
@@ -251,9 +301,26 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         .map_err(control_error)?
         .unwrap_or_else(|_| config.control.clone());
     let mut threads = Vec::new();
-    {
-        let shared = Arc::clone(&shared);
-        threads.push(thread::spawn(move || rtde_server::serve(listener, shared)));
+    let (mut rtde_address, mut fri_address, mut fri_target) = (None, None, None);
+    match server {
+        Server::Rtde(listener) => {
+            rtde_address = Some(
+                listener
+                    .local_addr()
+                    .map(|a| a.to_string())
+                    .unwrap_or_else(|_| config.rtde_listen.clone()),
+            );
+            let shared = Arc::clone(&shared);
+            threads.push(thread::spawn(move || rtde_server::serve(listener, shared)));
+        }
+        Server::Fri((socket, link)) => {
+            fri_address = socket.local_addr().ok().map(|a| a.to_string());
+            fri_target = Some(link.target.to_string());
+            let shared = Arc::clone(&shared);
+            threads.push(thread::spawn(move || {
+                fri_server::serve(socket, link, shared)
+            }));
+        }
     }
     {
         let shared = Arc::clone(&shared);
@@ -266,11 +333,60 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         - shared.started.elapsed().as_secs_f64();
     Ok(SimHandle {
         rtde_address,
+        fri_address,
+        fri_target,
         control_endpoint,
         clock_origin_unix_s,
         shared: Arc::new(SharedDebug(shared)),
         threads,
     })
+}
+
+enum Server {
+    Rtde(TcpListener),
+    Fri((UdpSocket, fri_server::FriLink)),
+}
+
+/// Checks the FRI settings and opens the controller's socket on the interface that reaches the
+/// target.
+fn fri_link(settings: &FriSettings) -> Result<(UdpSocket, fri_server::FriLink), SimError> {
+    if !(1..=100).contains(&settings.send_period_ms) {
+        return Err(SimError::Fri(format!(
+            "send period {} ms is outside the controller's 1-100 ms",
+            settings.send_period_ms
+        )));
+    }
+    if settings.receive_multiplier == 0 {
+        return Err(SimError::Fri(
+            "receive multiplier must be at least 1".to_owned(),
+        ));
+    }
+    let target: SocketAddr = settings
+        .target
+        .to_socket_addrs()
+        .ok()
+        .and_then(|mut addresses| addresses.next())
+        .ok_or_else(|| {
+            SimError::Fri(format!(
+                "target '{}' is not a HOST:PORT address",
+                settings.target
+            ))
+        })?;
+    let local = if target.ip().is_loopback() {
+        SocketAddr::new(target.ip(), 0)
+    } else {
+        SocketAddr::from(([0, 0, 0, 0], 0))
+    };
+    let socket = UdpSocket::bind(local)
+        .map_err(|error| SimError::Fri(format!("cannot open a UDP socket on {local}: {error}")))?;
+    Ok((
+        socket,
+        fri_server::FriLink {
+            target,
+            send_period: Duration::from_millis(u64::from(settings.send_period_ms)),
+            receive_multiplier: settings.receive_multiplier,
+        },
+    ))
 }
 
 fn control_loop(socket: zmq::Socket, shared: Arc<Shared>, robot: ShippedRobot) {
@@ -296,13 +412,30 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
         return failure("the request is not JSON");
     };
     match request["command"].as_str() {
-        Some("status") => json!({
-            "ok": true,
-            "time": shared.now_s(),
-            "clients": shared.clients.load(Ordering::Relaxed),
-            "paused": shared.paused.load(Ordering::Relaxed),
-            "robot": robot.name(),
-        }),
+        Some("status") => {
+            let fri = shared
+                .fri
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .as_ref()
+                .map(|link| {
+                    json!({
+                        "session_state": link.session_state.name(),
+                        "quality": link.quality.name(),
+                        "sequence": link.sequence,
+                        "timely_answers": link.timely_answers,
+                        "local_address": link.local_address,
+                    })
+                });
+            json!({
+                "ok": true,
+                "time": shared.now_s(),
+                "clients": shared.clients.load(Ordering::Relaxed),
+                "paused": shared.paused.load(Ordering::Relaxed),
+                "robot": robot.name(),
+                "fri": fri,
+            })
+        }
         Some("truth") => {
             let sample = shared.sample();
             json!({"ok": true, "time": sample.time_s, "q": sample.true_q, "qd": sample.qd, "reported_q": sample.q})

@@ -259,6 +259,7 @@ impl Backend for UrBackend {
                         controller_seq: None,
                         robot_mode: Some(values[5][0] as i32),
                         safety_mode: Some(values[6][0] as i32),
+                        link: None,
                     })),
                     Err(error) => Some(self.lose(format!("malformed data package: {error}"))),
                 }

@@ -9,16 +9,16 @@ use robot_bridge::{BackendKind, Config};
 #[derive(Debug, Parser)]
 #[command(name = "robot-bridge", version)]
 struct Args {
-    /// Controller protocol: ur (RTDE) or iiwa (FRI; not built yet).
+    /// Controller protocol: ur (RTDE client) or iiwa (FRI monitoring client).
     #[arg(long)]
     backend: String,
-    /// Controller address.
+    /// Controller address (iiwa: only its FRI datagrams are accepted).
     #[arg(long)]
     robot_host: String,
     /// RTDE port of a UR controller.
     #[arg(long, default_value_t = 30004)]
     rtde_port: u16,
-    /// UDP port to receive FRI monitoring messages on (iiwa).
+    /// UDP port to receive FRI monitoring messages on (iiwa); 0 picks a free one.
     #[arg(long, default_value_t = 30200)]
     fri_port: u16,
     /// Instruction socket (REP).
@@ -67,11 +67,15 @@ fn main() -> ExitCode {
             return ExitCode::from(1);
         }
     }
-    let result = robot_bridge::run(&config, &stop, |handle| {
-        println!(
+    let result = robot_bridge::run(&config, &stop, |handle| match &handle.controller_endpoint {
+        Some(controller) => println!(
+            "READY rep={} pub={} fri={controller}",
+            handle.rep_endpoint, handle.pub_endpoint
+        ),
+        None => println!(
             "READY rep={} pub={}",
             handle.rep_endpoint, handle.pub_endpoint
-        );
+        ),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

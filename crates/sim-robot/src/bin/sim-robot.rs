@@ -5,11 +5,12 @@ use std::sync::atomic::AtomicBool;
 use align_core::robots::ShippedRobot;
 use clap::Parser;
 
-/// A simulated cobot controller: UR RTDE server plus a ZeroMQ control socket for tests.
+/// A simulated cobot controller speaking the real controller's protocol (UR: RTDE server; iiwa:
+/// FRI monitoring messages to a client), plus a ZeroMQ control socket for tests.
 #[derive(Debug, Parser)]
 #[command(name = "sim-robot", version)]
 struct Args {
-    /// Robot to simulate: ur10 (CB3, 125 Hz), ur10e (e-Series, 500 Hz); iiwa14 is not built yet.
+    /// Robot to simulate: ur10 (CB3, RTDE 125 Hz), ur10e (e-Series, RTDE 500 Hz), iiwa14 (FRI).
     #[arg(long, default_value = "ur10")]
     robot: String,
     /// RTDE port (UR mode); 0 picks a free one.
@@ -18,9 +19,15 @@ struct Args {
     /// Address to listen on for RTDE.
     #[arg(long, default_value = "0.0.0.0")]
     rtde_host: String,
-    /// FRI target HOST:PORT (iiwa mode; not built yet).
-    #[arg(long)]
-    fri_target: Option<String>,
+    /// Where the FRI client listens, HOST:PORT (iiwa mode).
+    #[arg(long, default_value = "127.0.0.1:30200")]
+    fri_target: String,
+    /// Milliseconds between FRI monitoring messages, 1-100 (iiwa mode).
+    #[arg(long, default_value_t = 5)]
+    fri_send_period_ms: u32,
+    /// The FRI client answers every n-th monitoring message (iiwa mode).
+    #[arg(long, default_value_t = 1)]
+    fri_receive_multiplier: u32,
     /// Control socket endpoint.
     #[arg(long, default_value = "tcp://*:5000")]
     control: String,
@@ -48,14 +55,15 @@ fn main() -> ExitCode {
         );
         return ExitCode::from(2);
     };
-    if args.fri_target.is_some() {
-        eprintln!("sim-robot: --fri-target: FRI emulation for the iiwa is not built yet");
-        return ExitCode::from(2);
-    }
     let config = sim_robot::Config {
         robot,
         rtde_listen: format!("{}:{}", args.rtde_host, args.rtde_port),
         control: args.control,
+        fri: sim_robot::FriSettings {
+            target: args.fri_target,
+            send_period_ms: args.fri_send_period_ms,
+            receive_multiplier: args.fri_receive_multiplier,
+        },
     };
     let handle = match sim_robot::start(&config) {
         Ok(handle) => handle,
@@ -71,10 +79,18 @@ fn main() -> ExitCode {
             return ExitCode::from(1);
         }
     }
-    println!(
-        "READY rtde={} control={}",
-        handle.rtde_address, handle.control_endpoint
-    );
+    match (
+        &handle.rtde_address,
+        &handle.fri_address,
+        &handle.fri_target,
+    ) {
+        (Some(rtde), _, _) => println!("READY rtde={rtde} control={}", handle.control_endpoint),
+        (None, Some(fri), Some(target)) => println!(
+            "READY fri={fri} fri_target={target} control={}",
+            handle.control_endpoint
+        ),
+        _ => println!("READY control={}", handle.control_endpoint),
+    }
     sim_robot::wait_for_shutdown(&stop);
     handle.stop();
     ExitCode::SUCCESS

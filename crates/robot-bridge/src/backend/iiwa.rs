@@ -1,0 +1,334 @@
+//! KUKA LBR iiwa back end: an FRI monitoring client. It listens on a UDP port (30200 by
+//! default) for the controller's monitoring messages, checks each one's identifier, answers every
+//! `receive_multiplier`-th with a header-only command message that echoes the controller's
+//! sequence counter (as the FRI client SDK does in monitoring mode), and turns the measured joint
+//! positions into samples. FRI carries no joint velocities: they are differentiated from
+//! consecutive positions over the controller's own time stamps, so the first message of a
+//! session only seeds the difference and is not published.
+//!
+//! A receiver thread blocks on the socket and answers each message as it arrives (the answer's
+//! timeliness is what the controller grades); it hands the messages over a channel, whose
+//! timed wait is precise where a socket receive timeout only counts scheduler ticks (4 ms),
+//! too coarse for a 1 ms controller.
+//!
+//! The controller counts as lost after three send periods without a message; a message after
+//! that, or from a new session (its sequence counter started over), reconnects. Datagrams from
+//! another host than `--robot-host`, and datagrams that are not LBR monitoring messages, are
+//! counted and dropped.
+
+use std::net::{IpAddr, SocketAddr, ToSocketAddrs, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use kuka_fri::{CommandMessage, MAX_MESSAGE_BYTES, MonitoringMessage, SessionState, encode};
+
+use super::{Backend, Event, LinkState, Sample};
+
+/// Send periods of silence after which the controller counts as lost.
+pub const SILENT_PERIODS: u32 = 3;
+/// Assumed until the controller states its send period.
+const DEFAULT_SEND_PERIOD: Duration = Duration::from_millis(5);
+
+/// A monitoring message as the receiver thread got it.
+struct Received {
+    message: MonitoringMessage,
+    peer: SocketAddr,
+    at: Instant,
+}
+
+/// Datagrams the receiver dropped and why, the latest reason kept.
+#[derive(Debug, Default)]
+struct Rejections {
+    count: u64,
+    latest: Option<String>,
+}
+
+pub struct IiwaBackend {
+    local_address: SocketAddr,
+    messages: Receiver<Result<Received, String>>,
+    rejections: Arc<Mutex<Rejections>>,
+    stop: Arc<AtomicBool>,
+    receiver: Option<JoinHandle<()>>,
+    session: Option<Session>,
+    announced_listening: bool,
+    receiver_gone: bool,
+}
+
+/// The controller as last heard.
+struct Session {
+    send_period: Duration,
+    last_message: Instant,
+    /// Sequence counter, time stamp (s) and positions of the previous message.
+    previous: Option<(u32, f64, Vec<f64>)>,
+}
+
+impl std::fmt::Debug for IiwaBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("IiwaBackend")
+            .field("local_address", &self.local_address)
+            .finish()
+    }
+}
+
+impl IiwaBackend {
+    /// Binds the FRI port (0 picks a free one) and starts answering. `robot_host` is the
+    /// controller's address; only its datagrams are accepted.
+    pub fn bind(robot_host: &str, port: u16) -> std::io::Result<Self> {
+        let controller_ip = (robot_host, 0)
+            .to_socket_addrs()?
+            .next()
+            .map(|address| address.ip());
+        let socket = UdpSocket::bind(("0.0.0.0", port))?;
+        let local_address = socket.local_addr()?;
+        // Only so that shutdown is noticed; messages wake the thread at once.
+        socket.set_read_timeout(Some(Duration::from_millis(100)))?;
+        let (sender, messages) = mpsc::channel();
+        let rejections = Arc::new(Mutex::new(Rejections::default()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let receiver = {
+            let (rejections, stop) = (Arc::clone(&rejections), Arc::clone(&stop));
+            std::thread::spawn(move || receive(&socket, controller_ip, &sender, &rejections, &stop))
+        };
+        Ok(Self {
+            local_address,
+            messages,
+            rejections,
+            stop,
+            receiver: Some(receiver),
+            session: None,
+            announced_listening: false,
+            receiver_gone: false,
+        })
+    }
+
+    /// The bound UDP address.
+    pub fn local_address(&self) -> SocketAddr {
+        self.local_address
+    }
+
+    /// Turns one monitoring message into an event: the first of a session connects, the others
+    /// are samples.
+    fn on_message(&mut self, received: Received) -> Option<Event> {
+        let Received { message, peer, at } = received;
+        let sequence = message.header.sequence_counter;
+        let send_period = message
+            .send_period_s()
+            .map_or(DEFAULT_SEND_PERIOD, Duration::from_secs_f64);
+        let (Some(positions), Some(time_s)) =
+            (message.measured_positions(), message.controller_time_s())
+        else {
+            reject(
+                &self.rejections,
+                format!("from {peer}: a monitoring message without positions or time stamp"),
+            );
+            return None;
+        };
+        let positions = positions.to_vec();
+        let link = LinkState {
+            session_state: message.session_state().map(SessionState::name),
+            quality: message.quality().map(kuka_fri::ConnectionQuality::name),
+        };
+        let new_session = match &self.session {
+            None => true,
+            // A counter that went back (other than by wrapping) is a new FRI session.
+            Some(session) => session
+                .previous
+                .as_ref()
+                .is_some_and(|(previous, _, _)| sequence.wrapping_sub(*previous) > u32::MAX / 2),
+        };
+        if new_session {
+            let description = format!(
+                "FRI from {peer}, send period {} ms, answering every {} message(s), session {}",
+                send_period.as_millis(),
+                message.receive_multiplier(),
+                link.session_state.unwrap_or("unknown")
+            );
+            self.session = Some(Session {
+                send_period,
+                last_message: at,
+                previous: Some((sequence, time_s, positions)),
+            });
+            return Some(Event::Connected { description });
+        }
+        let session = self.session.as_mut()?;
+        session.send_period = send_period;
+        session.last_message = at;
+        let previous = session
+            .previous
+            .replace((sequence, time_s, positions.clone()));
+        let (_, previous_time_s, previous_positions) = previous?;
+        let dt_s = time_s - previous_time_s;
+        if dt_s <= 0.0 || previous_positions.len() != positions.len() {
+            // A repeated or reordered datagram: nothing to differentiate, nothing new.
+            return None;
+        }
+        let velocity = positions
+            .iter()
+            .zip(&previous_positions)
+            .map(|(q, q_previous)| (q - q_previous) / dt_s)
+            .collect();
+        let effort = message
+            .measured_torques()
+            .filter(|torques| torques.len() == positions.len())
+            .map(<[f64]>::to_vec);
+        Some(Event::Sample(Sample {
+            position: positions,
+            velocity,
+            effort,
+            controller_time: time_s,
+            controller_seq: Some(u64::from(sequence)),
+            robot_mode: message.session_state().map(|state| state as i32),
+            safety_mode: message
+                .robot_info
+                .as_ref()
+                .and_then(|info| info.safety_state),
+            link: Some(link),
+        }))
+    }
+}
+
+impl Drop for IiwaBackend {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(receiver) = self.receiver.take() {
+            let _ = receiver.join();
+        }
+    }
+}
+
+fn reject(rejections: &Mutex<Rejections>, reason: String) {
+    let mut rejections = rejections.lock().unwrap_or_else(|p| p.into_inner());
+    rejections.count += 1;
+    rejections.latest = Some(reason);
+}
+
+/// The receiver thread: checks each datagram, answers every `receive_multiplier`-th monitoring
+/// message with a header-only command message, and passes the messages on.
+fn receive(
+    socket: &UdpSocket,
+    controller_ip: Option<IpAddr>,
+    messages: &Sender<Result<Received, String>>,
+    rejections: &Mutex<Rejections>,
+    stop: &AtomicBool,
+) {
+    let mut buffer = [0u8; MAX_MESSAGE_BYTES + 1];
+    let mut own_sequence: u32 = 0;
+    let mut received_since_answer: u32 = 0;
+    while !stop.load(Ordering::Relaxed) {
+        let (count, peer) = match socket.recv_from(&mut buffer) {
+            Ok(received) => received,
+            Err(error)
+                if matches!(
+                    error.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                continue;
+            }
+            Err(error) => {
+                let _ = messages.send(Err(format!("FRI socket error: {error}")));
+                return;
+            }
+        };
+        let at = Instant::now();
+        if controller_ip.is_some_and(|ip| ip != peer.ip()) {
+            reject(
+                rejections,
+                format!("a datagram from {peer}, not the controller"),
+            );
+            continue;
+        }
+        let message = match MonitoringMessage::decode_checked(&buffer[..count]) {
+            Ok(message) => message,
+            Err(error) => {
+                reject(rejections, format!("from {peer}: {error}"));
+                continue;
+            }
+        };
+        received_since_answer += 1;
+        if received_since_answer >= message.receive_multiplier() {
+            received_since_answer = 0;
+            let reply =
+                CommandMessage::monitoring_reply(own_sequence, message.header.sequence_counter);
+            own_sequence = own_sequence.wrapping_add(1);
+            let _ = socket.send_to(&encode(&reply), peer);
+        }
+        if messages.send(Ok(Received { message, peer, at })).is_err() {
+            return;
+        }
+    }
+}
+
+impl Backend for IiwaBackend {
+    fn joint_names(&self) -> Vec<String> {
+        (1..=kuka_fri::LBR_JOINTS)
+            .map(|joint| format!("iiwa_joint_{joint}"))
+            .collect()
+    }
+
+    fn effort_unit(&self) -> Option<&'static str> {
+        Some("N m")
+    }
+
+    fn next_event(&mut self, timeout: Duration) -> Option<Event> {
+        if !self.announced_listening {
+            self.announced_listening = true;
+            return Some(Event::Connecting);
+        }
+        if self.receiver_gone {
+            std::thread::sleep(timeout);
+            return None;
+        }
+        let started = Instant::now();
+        loop {
+            let now = Instant::now();
+            let mut wait = timeout.saturating_sub(now - started);
+            if let Some(session) = &self.session {
+                let silence_limit = session.send_period * SILENT_PERIODS;
+                let silent = now.saturating_duration_since(session.last_message);
+                if silent >= silence_limit {
+                    let period_ms = session.send_period.as_secs_f64() * 1e3;
+                    self.session = None;
+                    return Some(Event::Lost {
+                        reason: format!(
+                            "no FRI message for {:.1} ms ({SILENT_PERIODS} send periods of {period_ms} ms)",
+                            silent.as_secs_f64() * 1e3
+                        ),
+                    });
+                }
+                wait = wait.min(silence_limit - silent);
+            }
+            if wait.is_zero() {
+                return None;
+            }
+            match self.messages.recv_timeout(wait) {
+                Ok(Ok(received)) => {
+                    if let Some(event) = self.on_message(received) {
+                        return Some(event);
+                    }
+                }
+                Ok(Err(reason)) => {
+                    self.receiver_gone = true;
+                    self.session = None;
+                    return Some(Event::Lost { reason });
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => {
+                    self.receiver_gone = true;
+                    self.session = None;
+                    return Some(Event::Lost {
+                        reason: "the FRI receiver stopped".to_owned(),
+                    });
+                }
+            }
+        }
+    }
+
+    fn rejected_datagrams(&self) -> Option<(u64, Option<String>)> {
+        let rejections = self.rejections.lock().unwrap_or_else(|p| p.into_inner());
+        Some((rejections.count, rejections.latest.clone()))
+    }
+}
