@@ -114,9 +114,89 @@ fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
 }
 
 #[test]
+fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
+    ensure_binaries();
+    // The bridge listens first; the controller is pointed at it, as on a real cell.
+    let bridge = spawn(
+        binary("robot-bridge"),
+        &[
+            "--backend",
+            "iiwa",
+            "--robot-host",
+            "127.0.0.1",
+            "--fri-port",
+            "0",
+            "--rep",
+            "tcp://127.0.0.1:*",
+            "--pub",
+            "tcp://127.0.0.1:*",
+        ],
+        Duration::from_secs(20),
+    );
+    let fri_port = bridge.endpoint("fri").rsplit(':').next().unwrap().to_owned();
+    let sim = spawn(
+        binary("sim-robot"),
+        &[
+            "--robot",
+            "iiwa14",
+            "--fri-target",
+            &format!("127.0.0.1:{fri_port}"),
+            "--fri-send-period-ms",
+            "2",
+            "--control",
+            "tcp://127.0.0.1:*",
+        ],
+        Duration::from_secs(20),
+    );
+    assert!(sim.endpoint("fri_target").ends_with(&fri_port));
+    let output = Command::new(python())
+        .arg(repo_root().join("examples/python/mirror_joint_states.py"))
+        .args([
+            "--rep",
+            bridge.endpoint("rep"),
+            "--pub",
+            bridge.endpoint("pub"),
+            "--robot-side",
+            "IiwaDrive",
+            "--count",
+            "50",
+            "--json",
+            "--timeout-ms",
+            "10000",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let lines: Vec<serde_json::Value> = String::from_utf8(output.stdout)
+        .unwrap()
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 50);
+    assert_eq!(lines[0]["from"], "IiwaDrive");
+    assert_eq!(lines[0]["position"].as_array().unwrap().len(), 7);
+    let span_s = lines[49]["controller_time"].as_f64().unwrap()
+        - lines[0]["controller_time"].as_f64().unwrap();
+    // 2 ms send period; a loaded machine only ever stretches the simulator's clock.
+    assert!((0.0019..0.004).contains(&(span_s / 49.0)), "{span_s}");
+    for service in [sim, bridge] {
+        let status = service
+            .terminate(Duration::from_secs(10))
+            .expect("exits within 10 s of SIGTERM");
+        assert!(status.success(), "{status:?}");
+    }
+}
+
+#[test]
 fn bad_flags_exit_2_with_a_reason() {
     ensure_binaries();
-    let cases: [(&str, &[&str], &str); 4] = [
+    let taken = std::net::UdpSocket::bind("0.0.0.0:0").unwrap();
+    let taken_port = taken.local_addr().unwrap().port().to_string();
+    let cases: [(&str, &[&str], &str); 5] = [
         (
             "robot-bridge",
             &["--backend", "abb", "--robot-host", "x"],
@@ -129,18 +209,39 @@ fn bad_flags_exit_2_with_a_reason() {
                 "iiwa",
                 "--robot-host",
                 "127.0.0.1",
+                "--fri-port",
+                &taken_port,
                 "--rep",
                 "tcp://127.0.0.1:*",
                 "--pub",
                 "tcp://127.0.0.1:*",
             ],
-            "iiwa (FRI) back end is not built yet",
+            "cannot listen for FRI on UDP port",
         ),
         ("sim-robot", &["--robot", "kr16"], "unknown robot 'kr16'"),
         (
             "sim-robot",
-            &["--robot", "iiwa14", "--control", "tcp://127.0.0.1:*"],
-            "not simulated yet",
+            &[
+                "--robot",
+                "iiwa14",
+                "--fri-send-period-ms",
+                "0",
+                "--control",
+                "tcp://127.0.0.1:*",
+            ],
+            "outside the controller's 1-100 ms",
+        ),
+        (
+            "sim-robot",
+            &[
+                "--robot",
+                "iiwa14",
+                "--fri-target",
+                "nowhere",
+                "--control",
+                "tcp://127.0.0.1:*",
+            ],
+            "is not a HOST:PORT address",
         ),
     ];
     for (program, args, reason) in cases {

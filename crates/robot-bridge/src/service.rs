@@ -216,11 +216,12 @@ fn backend_loop(
     samples: Sender<(Sample, f64)>,
 ) {
     while !stop.load(Ordering::Relaxed) {
-        let Some(event) = backend.next_event(Duration::from_millis(50)) else {
-            continue;
-        };
+        let event = backend.next_event(Duration::from_millis(50));
         let mut controller = shared.controller.lock().unwrap_or_else(|p| p.into_inner());
         controller.rejected_datagrams = backend.rejected_datagrams().map(|(count, _)| count);
+        let Some(event) = event else {
+            continue;
+        };
         match event {
             Event::Connecting => controller.state = "connecting",
             Event::Connected { .. } => {
