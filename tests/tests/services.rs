@@ -133,7 +133,12 @@ fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
         ],
         Duration::from_secs(20),
     );
-    let fri_port = bridge.endpoint("fri").rsplit(':').next().unwrap().to_owned();
+    let fri_port = bridge
+        .endpoint("fri")
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .to_owned();
     let sim = spawn(
         binary("sim-robot"),
         &[

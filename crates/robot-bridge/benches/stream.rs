@@ -1,17 +1,19 @@
-//! Streaming benchmark: sim-robot (UR10e, 500 Hz RTDE) -> robot-bridge -> 4 subscribers, all in
-//! this process on loopback. Prints a table: achieved rate, sequence gaps, latency from the
-//! controller's sample time to each subscriber's receipt, CPU of the whole process, and the
-//! instruction round trip.
+//! Streaming benchmark on loopback: sim-robot (in this process) -> the robot-bridge binary (a
+//! child process, so its CPU is its own) -> 4 ZeroMQ subscribers (threads here). For the UR10e
+//! (RTDE at 500 Hz) and the iiwa (FRI at 1 kHz), prints a table per back end: achieved rate,
+//! bridge sequence gaps, latency from the controller's sample time to each subscriber's receipt,
+//! the bridge's CPU, and the instruction round trip.
 //!
-//!     cargo bench -p robot-bridge --bench stream -- [SECONDS]     (default 10)
+//!     cargo bench -p robot-bridge --bench stream -- [SECONDS] [ur|iiwa]   (default 10 s, both)
 
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use align_core::robots::ShippedRobot;
-use robot_bridge::{BackendKind, Config};
 
 const STATUS: &str = r#"{"header":{"from":"ips","to":"ros","type":"instruction"},"body":{"command":"status","content":"bridge"}}"#;
 const START: &str = r#"{"header":{"from":"ips","to":"ros","type":"instruction"},"body":{"command":"start","content":"hwState"}}"#;
@@ -29,9 +31,9 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[((sorted.len() - 1) as f64 * p).round() as usize]
 }
 
-/// User + system CPU seconds of this process, from /proc/self/stat.
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+/// User + system CPU seconds of a process, from /proc/PID/stat (clock ticks of 10 ms).
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
     let fields: Vec<&str> = stat
         .rsplit(')')
         .next()
@@ -51,30 +53,127 @@ fn socket(context: &zmq::Context, kind: zmq::SocketType, endpoint: &str) -> zmq:
     socket
 }
 
+/// The bridge binary as a child process, with the endpoints of its READY line.
+struct Bridge {
+    child: Child,
+    endpoints: Vec<(String, String)>,
+}
+
+impl Bridge {
+    fn spawn(args: &[&str]) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_robot-bridge"))
+            .args(args)
+            .args(["--rep", "tcp://127.0.0.1:*", "--pub", "tcp://127.0.0.1:*"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("robot-bridge starts");
+        let stdout = child.stdout.take().expect("stdout");
+        let mut line = String::new();
+        BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("READY line");
+        let endpoints = line
+            .split_whitespace()
+            .skip(1)
+            .filter_map(|pair| {
+                pair.split_once('=')
+                    .map(|(k, v)| (k.to_owned(), v.to_owned()))
+            })
+            .collect();
+        Self { child, endpoints }
+    }
+
+    fn endpoint(&self, key: &str) -> &str {
+        self.endpoints
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+            .expect("endpoint in the READY line")
+    }
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 fn main() {
-    let seconds: f64 = std::env::args()
+    let arguments: Vec<String> = std::env::args().skip(1).collect();
+    let seconds: f64 = arguments
+        .iter()
         .filter_map(|a| a.parse().ok())
         .next()
         .unwrap_or(10.0);
-    let sim = sim_robot::start(&sim_robot::Config {
-        robot: ShippedRobot::Ur10e,
-        rtde_listen: "127.0.0.1:0".to_owned(),
-        control: "tcp://127.0.0.1:*".to_owned(),
-        fri: sim_robot::FriSettings::default(),
-    })
-    .expect("sim-robot");
-    let port = sim.rtde_port().expect("port");
-    let bridge = robot_bridge::start(&Config {
-        backend: BackendKind::Ur,
-        robot_host: "127.0.0.1".to_owned(),
-        rtde_port: port,
-        fri_port: 30200,
-        rep: "tcp://127.0.0.1:*".to_owned(),
-        publish: "tcp://127.0.0.1:*".to_owned(),
-    })
-    .expect("robot-bridge");
+    let only = arguments
+        .iter()
+        .find(|a| matches!(a.as_str(), "ur" | "iiwa"))
+        .cloned();
+    if only.as_deref() != Some("iiwa") {
+        let sim = sim_robot::start(&sim_robot::Config {
+            robot: ShippedRobot::Ur10e,
+            rtde_listen: "127.0.0.1:0".to_owned(),
+            control: "tcp://127.0.0.1:*".to_owned(),
+            fri: sim_robot::FriSettings::default(),
+        })
+        .expect("sim-robot");
+        let port = sim.rtde_port().expect("port").to_string();
+        let bridge = Bridge::spawn(&[
+            "--backend",
+            "ur",
+            "--robot-host",
+            "127.0.0.1",
+            "--rtde-port",
+            &port,
+        ]);
+        measure(
+            &bridge,
+            sim.clock_origin_unix_s,
+            seconds,
+            "UR10e, RTDE at 500 Hz",
+        );
+        sim.stop();
+    }
+    if only.as_deref() != Some("ur") {
+        let bridge = Bridge::spawn(&[
+            "--backend",
+            "iiwa",
+            "--robot-host",
+            "127.0.0.1",
+            "--fri-port",
+            "0",
+        ]);
+        let port = bridge
+            .endpoint("fri")
+            .rsplit(':')
+            .next()
+            .expect("port")
+            .to_owned();
+        let sim = sim_robot::start(&sim_robot::Config {
+            robot: ShippedRobot::Iiwa14,
+            rtde_listen: String::new(),
+            control: "tcp://127.0.0.1:*".to_owned(),
+            fri: sim_robot::FriSettings {
+                target: format!("127.0.0.1:{port}"),
+                send_period_ms: 1,
+                receive_multiplier: 1,
+            },
+        })
+        .expect("sim-robot");
+        measure(
+            &bridge,
+            sim.clock_origin_unix_s,
+            seconds,
+            "iiwa 14, FRI at 1 kHz",
+        );
+        sim.stop();
+    }
+}
+
+fn measure(bridge: &Bridge, origin: f64, seconds: f64, label: &str) {
     let context = zmq::Context::new();
-    let rep = socket(&context, zmq::REQ, &bridge.rep_endpoint);
+    let rep = socket(&context, zmq::REQ, bridge.endpoint("rep"));
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
         rep.send(STATUS, 0).expect("send");
@@ -84,11 +183,10 @@ fn main() {
         }
         thread::sleep(Duration::from_millis(20));
     }
-    let origin = sim.clock_origin_unix_s;
     let stop = Arc::new(AtomicBool::new(false));
     let subscribers: Vec<_> = (0..4)
         .map(|_| {
-            let sub = socket(&context, zmq::SUB, &bridge.pub_endpoint);
+            let sub = socket(&context, zmq::SUB, bridge.endpoint("pub"));
             sub.set_subscribe(b"").expect("subscribe");
             let stop = Arc::clone(&stop);
             thread::spawn(move || {
@@ -117,14 +215,16 @@ fn main() {
             })
         })
         .collect();
+    // Let the subscriptions reach the publisher before the stream starts.
     thread::sleep(Duration::from_millis(300));
     rep.send(START, 0).expect("send");
     let _ = rep.recv_string(0);
-    let cpu_before = cpu_seconds();
+    let pid = bridge.child.id();
+    let cpu_before = cpu_seconds(pid);
     let started = Instant::now();
     thread::sleep(Duration::from_secs_f64(seconds));
     let elapsed = started.elapsed().as_secs_f64();
-    let cpu = cpu_seconds() - cpu_before;
+    let cpu = cpu_seconds(pid) - cpu_before;
     let mut round_trips = Vec::new();
     for _ in 0..1000 {
         let sent = Instant::now();
@@ -133,6 +233,7 @@ fn main() {
         round_trips.push(sent.elapsed().as_secs_f64());
     }
     stop.store(true, Ordering::Relaxed);
+    println!("\n### {label}, {seconds} s\n");
     println!(
         "| subscriber | messages | rate (Hz) | seq gaps | latency p50 (ms) | p99 (ms) | max (ms) |"
     );
@@ -151,11 +252,9 @@ fn main() {
     }
     round_trips.sort_by(f64::total_cmp);
     println!(
-        "\n{seconds} s at 500 Hz (UR10e); process CPU (sim + bridge + 4 subscribers): {:.1}% of one core; instruction round trip p50 {:.3} ms, p99 {:.3} ms",
+        "\nrobot-bridge CPU: {:.1}% of one core; instruction round trip p50 {:.3} ms, p99 {:.3} ms",
         cpu / elapsed * 100.0,
         percentile(&round_trips, 0.5) * 1e3,
         percentile(&round_trips, 0.99) * 1e3
     );
-    bridge.stop();
-    sim.stop();
 }
