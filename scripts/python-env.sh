@@ -14,8 +14,12 @@ fi
 # Checked by version, so bumping the pin upgrades an existing venv. Wheel only: building ur_rtde
 # from source needs Boost and a C++ toolchain, and 1.6.5 ships a manylinux wheel for CPython 3.11.
 if ! .venv/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.version('ur-rtde') != '$UR_RTDE_VERSION')" 2>/dev/null; then
-    .venv/bin/python -m pip install --quiet --disable-pip-version-check --only-binary=:all: \
-        "ur-rtde==$UR_RTDE_VERSION"
+    if ! .venv/bin/python -m pip install --quiet --disable-pip-version-check --only-binary=:all: \
+        "ur-rtde==$UR_RTDE_VERSION"; then
+        echo "python-env.sh: pip could not install ur-rtde==$UR_RTDE_VERSION (a manylinux wheel" \
+            "for CPython 3.11 x86_64); is the package index reachable?" >&2
+        exit 1
+    fi
 fi
 .venv/bin/python -c "import zmq; print('python env ready: pyzmq', zmq.__version__)"
 .venv/bin/python -c "import rtde_receive, importlib.metadata as m; print('python env ready: ur-rtde', m.version('ur-rtde'))"
