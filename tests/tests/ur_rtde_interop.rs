@@ -21,6 +21,7 @@ use system_tests::{Service, binary, ensure_binaries, python, repo_root, try_spaw
 const HOLD_Q: [f64; 6] = [0.31, -1.23, 1.42, -1.77, -1.49, 0.27];
 const SAMPLES: usize = 5;
 const JOINT_TOLERANCE_RAD: f64 = 1e-9;
+const STANDARD_GRAVITY_M_PER_S2: f64 = 9.80665;
 
 /// A random loopback address outside 127.0.0.0/16.
 fn random_loopback_host() -> String {
@@ -164,6 +165,20 @@ fn ur_rtde_receive_interface_reads_the_simulated_joints_and_clock() {
             "timestamp {timestamp} s outside ({previous_s}, {end_s}] s"
         );
         previous_s = timestamp;
+
+        // Variables behind ur_rtde's 64-bit digital I/O fields: garbage if any size before them
+        // differed from ur_rtde's type table. A healthy arm at rest: RUNNING, NORMAL, PLAYING,
+        // the normal-mode safety bit, and an accelerometer reading 1 g.
+        assert_eq!(sample["robot_mode"], 7, "{sample}");
+        assert_eq!(sample["safety_mode"], 1, "{sample}");
+        assert_eq!(sample["runtime_state"], 2, "{sample}");
+        assert_eq!(sample["safety_status_bits"], 1, "{sample}");
+        let acceleration = floats(&sample["tool_accelerometer"]);
+        let magnitude = acceleration.iter().map(|a| a * a).sum::<f64>().sqrt();
+        assert!(
+            (magnitude - STANDARD_GRAVITY_M_PER_S2).abs() < 1e-9,
+            "{sample}"
+        );
     }
 
     let status = sim
