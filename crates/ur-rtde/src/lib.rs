@@ -320,8 +320,8 @@ pub fn decode_values(
 }
 
 /// The variable names of a setup request's comma-separated list. ur_rtde ends its lists with a
-/// comma; the controller reads that as a terminator, not as an empty name, so the one empty
-/// entry it leaves at the end is dropped (an empty name anywhere else stays, to be refused).
+/// comma and real controllers serve it, so a trailing comma is a terminator, not an empty name:
+/// the one empty entry it leaves is dropped (an empty name anywhere else stays, to be refused).
 pub fn recipe_names(list: &str) -> Vec<&str> {
     let list = list.strip_suffix(',').unwrap_or(list);
     list.split(',').collect()
