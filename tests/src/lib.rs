@@ -1,5 +1,6 @@
-//! Helpers for cross-service tests: spawning the project's binaries, reading their `READY` line
-//! (bounded by a timeout, never a sleep), and stopping them with SIGTERM.
+//! Helpers for cross-service tests: building and spawning the project's binaries, reading their
+//! `READY` line (bounded by a timeout, never a sleep), stopping them with SIGTERM, and the
+//! Python venv third-party clients run from.
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -62,12 +63,18 @@ pub fn binary(name: &str) -> PathBuf {
 
 /// Spawns `program` and waits up to `within` for its `READY key=value ...` line.
 pub fn spawn(program: PathBuf, args: &[&str], within: Duration) -> Service {
+    try_spawn(program, args, within).unwrap_or_else(|reason| panic!("{reason}"))
+}
+
+/// As [`spawn`], but a program that exits or stays silent is reported (and killed), not a
+/// panic: for callers that retry, e.g. with another address.
+pub fn try_spawn(program: PathBuf, args: &[&str], within: Duration) -> Result<Service, String> {
     let mut child = Command::new(&program)
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
-        .unwrap_or_else(|error| panic!("cannot spawn {}: {error}", program.display()));
+        .map_err(|error| format!("cannot spawn {}: {error}", program.display()))?;
     let stdout = child.stdout.take().expect("piped stdout");
     let (sender, receiver) = mpsc::channel();
     std::thread::spawn(move || {
@@ -77,12 +84,15 @@ pub fn spawn(program: PathBuf, args: &[&str], within: Duration) -> Service {
             }
         }
     });
-    let line = receiver.recv_timeout(within).unwrap_or_else(|_| {
-        panic!(
-            "{} printed no READY line within {within:?}",
+    // The reader drops the sender when stdout closes, so an early exit ends the wait at once.
+    let Ok(line) = receiver.recv_timeout(within) else {
+        let _ = child.kill();
+        let status = child.wait();
+        return Err(format!(
+            "{} {args:?} printed no READY line within {within:?} (exit: {status:?})",
             program.display()
-        )
-    });
+        ));
+    };
     let endpoints = line
         .split_whitespace()
         .skip(1)
@@ -91,5 +101,40 @@ pub fn spawn(program: PathBuf, args: &[&str], within: Duration) -> Service {
                 .map(|(k, v)| (k.to_owned(), v.to_owned()))
         })
         .collect();
-    Service { child, endpoints }
+    Ok(Service { child, endpoints })
+}
+
+/// The workspace root.
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// `cargo test -p system-tests` does not build other packages' binaries: build them. Always,
+/// not only when missing: a binary left from before a source change would be tested instead of
+/// the code in the tree (cargo makes this a quick no-op when they are fresh).
+pub fn ensure_binaries(packages: &[&str]) {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    let mut command = Command::new(cargo);
+    command.arg("build").current_dir(repo_root());
+    for name in packages {
+        command.args(["-p", name]);
+    }
+    let status = command.status().expect("cargo runs");
+    assert!(status.success(), "cargo build {packages:?} failed");
+}
+
+/// The venv's Python after `scripts/python-env.sh` made sure its clients are installed. Its
+/// output is shown on failure, e.g. when pip cannot reach the package index.
+pub fn python() -> PathBuf {
+    let output = Command::new("bash")
+        .arg(repo_root().join("scripts/python-env.sh"))
+        .output()
+        .expect("bash runs scripts/python-env.sh");
+    assert!(
+        output.status.success(),
+        "scripts/python-env.sh failed, so the third-party clients these tests need are missing:\n{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    repo_root().join(".venv/bin/python")
 }

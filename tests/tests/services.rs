@@ -5,42 +5,14 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
-use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
-use system_tests::{binary, spawn};
-
-fn repo_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// `cargo test -p system-tests` alone does not build other packages' binaries: build them.
-fn ensure_binaries() {
-    if binary("sim-robot").exists() && binary("robot-bridge").exists() {
-        return;
-    }
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
-    let status = Command::new(cargo)
-        .args(["build", "-p", "sim-robot", "-p", "robot-bridge"])
-        .current_dir(repo_root())
-        .status()
-        .unwrap();
-    assert!(status.success());
-}
-
-fn python() -> PathBuf {
-    let status = Command::new("bash")
-        .arg(repo_root().join("scripts/python-env.sh"))
-        .status()
-        .expect("bash runs scripts/python-env.sh");
-    assert!(status.success(), "scripts/python-env.sh failed");
-    repo_root().join(".venv/bin/python")
-}
+use system_tests::{binary, ensure_binaries, python, repo_root, spawn};
 
 #[test]
 fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
-    ensure_binaries();
+    ensure_binaries(&["sim-robot", "robot-bridge"]);
     let sim = spawn(
         binary("sim-robot"),
         &[
@@ -115,7 +87,7 @@ fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
 
 #[test]
 fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
-    ensure_binaries();
+    ensure_binaries(&["sim-robot", "robot-bridge"]);
     // The bridge listens first; the controller is pointed at it, as on a real cell.
     let bridge = spawn(
         binary("robot-bridge"),
@@ -198,7 +170,7 @@ fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
 
 #[test]
 fn bad_flags_exit_2_with_a_reason() {
-    ensure_binaries();
+    ensure_binaries(&["sim-robot", "robot-bridge"]);
     let taken = std::net::UdpSocket::bind("0.0.0.0:0").unwrap();
     let taken_port = taken.local_addr().unwrap().port().to_string();
     let cases: [(&str, &[&str], &str); 5] = [

@@ -40,7 +40,7 @@ use std::time::{Duration, Instant};
 use align_core::kinematics::Chain;
 use align_core::robots::ShippedRobot;
 pub use motion::Motion;
-use nalgebra::Isometry3;
+use nalgebra::{DVector, Isometry3, Vector3};
 use serde_json::{Value, json};
 
 #[derive(Debug, Clone)]
@@ -101,23 +101,53 @@ pub(crate) struct Sample {
     /// What the encoders say.
     q: Vec<f64>,
     qd: Vec<f64>,
+    qdd: Vec<f64>,
+    /// Base frame, rotation as a rotation vector (UR's pose convention).
     tcp_pose: [f64; 6],
+    /// Base frame: linear then angular velocity.
+    tcp_speed: [f64; 6],
+    /// Tool frame, m/s^2: what the tool flange's accelerometer reads at rest (gravity's
+    /// reaction, pointing up); the arm's own accelerations are not modelled.
+    tool_accelerometer: [f64; 3],
 }
 
+/// Controller states a healthy arm reports (UR's RTDE guide): robot mode RUNNING, safety mode
+/// NORMAL, joint mode RUNNING, runtime state PLAYING, and the status bits that go with them
+/// (robot: power on and program running; safety: normal mode).
+const ROBOT_MODE_RUNNING: f64 = 7.0;
+const SAFETY_MODE_NORMAL: f64 = 1.0;
+const JOINT_MODE_RUNNING: f64 = 253.0;
+const RUNTIME_STATE_PLAYING: f64 = 2.0;
+const ROBOT_STATUS_POWER_ON_AND_PROGRAM_RUNNING: f64 = 0b11 as f64;
+const SAFETY_STATUS_NORMAL_MODE: f64 = 0b1 as f64;
+/// The arm's supply (V) and an idle joint's temperature (deg C): no electrical or thermal model,
+/// so the values an idle arm in a room would show rather than zeros that read as a fault.
+const SUPPLY_VOLTAGE_V: f64 = 48.0;
+const IDLE_JOINT_TEMPERATURE_C: f64 = 25.0;
+const STANDARD_GRAVITY_M_PER_S2: f64 = 9.80665;
+
 impl Sample {
-    /// The value of an RTDE output variable for this sample.
+    /// The value of an RTDE output variable for this sample. Variables the simulation does not
+    /// model (currents, torques, forces, I/O, registers, payload) read zero.
     pub(crate) fn value(&self, name: &str) -> Vec<f64> {
         match name {
             "timestamp" => vec![self.time_s],
             "actual_q" | "target_q" => self.q.clone(),
             "actual_qd" | "target_qd" => self.qd.clone(),
+            "target_qdd" => self.qdd.clone(),
             "actual_TCP_pose" | "target_TCP_pose" => self.tcp_pose.to_vec(),
-            // RUNNING and NORMAL, as a healthy controller reports them.
-            "robot_mode" => vec![7.0],
-            "safety_mode" | "safety_status" => vec![1.0],
-            "runtime_state" => vec![2.0],
+            "actual_TCP_speed" | "target_TCP_speed" => self.tcp_speed.to_vec(),
+            "actual_tool_accelerometer" => self.tool_accelerometer.to_vec(),
+            "robot_mode" => vec![ROBOT_MODE_RUNNING],
+            "safety_mode" | "safety_status" => vec![SAFETY_MODE_NORMAL],
+            "joint_mode" => vec![JOINT_MODE_RUNNING; self.q.len()],
+            "runtime_state" => vec![RUNTIME_STATE_PLAYING],
+            "robot_status_bits" => vec![ROBOT_STATUS_POWER_ON_AND_PROGRAM_RUNNING],
+            "safety_status_bits" => vec![SAFETY_STATUS_NORMAL_MODE],
             "speed_scaling" | "target_speed_fraction" => vec![1.0],
-            "joint_mode" => vec![253.0; 6],
+            "actual_main_voltage" | "actual_robot_voltage" => vec![SUPPLY_VOLTAGE_V],
+            "actual_joint_voltage" => vec![SUPPLY_VOLTAGE_V; self.q.len()],
+            "joint_temperatures" => vec![IDLE_JOINT_TEMPERATURE_C; self.q.len()],
             _ => Vec::new(),
         }
     }
@@ -163,15 +193,22 @@ impl Shared {
         // offset angles.
         let q: Vec<f64> = true_q.iter().zip(&offsets).map(|(q, o)| q + o).collect();
         let qd = motion.velocity(time_s);
-        let pose: Isometry3<f64> = self.chain.forward_unchecked(&q);
-        let t = pose.translation.vector;
-        let r = pose.rotation.scaled_axis();
+        let (base_from_tool, jacobian): (Isometry3<f64>, _) = self.chain.jacobian_unchecked(&q);
+        let t = base_from_tool.translation.vector;
+        let r = base_from_tool.rotation.scaled_axis();
+        let speed = jacobian * DVector::from_column_slice(&qd);
+        let up_in_tool = base_from_tool
+            .rotation
+            .inverse_transform_vector(&Vector3::new(0.0, 0.0, STANDARD_GRAVITY_M_PER_S2));
         Sample {
             time_s,
             true_q,
             q,
             qd,
+            qdd: motion.acceleration(time_s),
             tcp_pose: [t.x, t.y, t.z, r.x, r.y, r.z],
+            tcp_speed: [speed[0], speed[1], speed[2], speed[3], speed[4], speed[5]],
+            tool_accelerometer: [up_in_tool.x, up_in_tool.y, up_in_tool.z],
         }
     }
 

@@ -62,6 +62,24 @@ impl Motion {
         }
     }
 
+    /// Joint accelerations at controller time `t_s`, rad/s^2.
+    pub fn acceleration(&self, t_s: f64) -> Vec<f64> {
+        match self {
+            Motion::Hold { q } => vec![0.0; q.len()],
+            Motion::Sine {
+                amplitude,
+                period_s,
+                ..
+            } => {
+                let omega = std::f64::consts::TAU / period_s;
+                amplitude
+                    .iter()
+                    .map(|a| -a * omega * omega * (omega * t_s).sin())
+                    .collect()
+            }
+        }
+    }
+
     /// Checks the motion fits a robot with these position limits.
     pub fn check(&self, limits: &[(f64, f64)]) -> Result<(), String> {
         if self.dof() != limits.len() {

@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use ur_rtde::{Package, ValueType, encode_value, output_type, package};
+use ur_rtde::{Package, ValueType, encode_value, output_type, package, recipe_names};
 
 use crate::Shared;
 
@@ -86,11 +86,14 @@ fn client(stream: TcpStream, shared: Arc<Shared>) {
             }
             Err(_) => break,
         };
+        // The streamer writes too: one write call per package under this lock keeps them
+        // whole. Answering under the lock as well means that once a start request turns
+        // streaming on, no data package can reach the client before the start reply (ur_rtde
+        // reads exactly one package after its start request and takes it as the reply).
+        let _guard = shared.write_lock.lock();
         let reply = answer(&request, &shared, &session, &streaming);
         if let Some(reply) = reply {
             let Ok(bytes) = reply.encode() else { break };
-            // The streamer writes too: one write call per package keeps them whole.
-            let _guard = shared.write_lock.lock();
             if writer.write_all(&bytes).is_err() {
                 break;
             }
@@ -145,8 +148,8 @@ fn answer(
             } else {
                 (shared.max_frequency_hz, &request.payload[..])
             };
-            let names: Vec<String> = String::from_utf8_lossy(names)
-                .split(',')
+            let names: Vec<String> = recipe_names(&String::from_utf8_lossy(names))
+                .into_iter()
                 .map(str::to_owned)
                 .collect();
             let types: Vec<Option<ValueType>> = names.iter().map(|n| output_type(n)).collect();
@@ -178,7 +181,7 @@ fn answer(
             ))
         }
         package::CONTROL_PACKAGE_SETUP_INPUTS => {
-            let count = String::from_utf8_lossy(&request.payload).split(',').count();
+            let count = recipe_names(&String::from_utf8_lossy(&request.payload)).len();
             let mut payload = vec![0u8];
             payload.extend_from_slice(vec!["NOT_FOUND"; count].join(",").as_bytes());
             Some(Package::new(package::CONTROL_PACKAGE_SETUP_INPUTS, payload))

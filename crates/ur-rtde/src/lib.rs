@@ -178,8 +178,9 @@ impl ValueType {
 }
 
 /// The type of an output variable as a UR controller reports it, or `None` (the controller
-/// answers NOT_FOUND). Covers the variables UR's RTDE guide lists for outputs that clients such
-/// as ur_rtde's receive interface ask for by default.
+/// answers NOT_FOUND). Covers the variables UR's RTDE guide lists for outputs, including every
+/// one ur_rtde's receive interface asks for by default; a client that decodes data packages
+/// with its own type table (ur_rtde does) misreads every later value if one size here is wrong.
 pub fn output_type(name: &str) -> Option<ValueType> {
     use ValueType::*;
     if let Some(rest) = name.strip_prefix("output_int_register_") {
@@ -210,7 +211,6 @@ pub fn output_type(name: &str) -> Option<ValueType> {
         | "standard_analog_output1"
         | "tool_analog_input0"
         | "tool_analog_input1"
-        | "tool_output_voltage"
         | "tool_output_current"
         | "tool_temperature"
         | "payload" => Double,
@@ -231,15 +231,17 @@ pub fn output_type(name: &str) -> Option<ValueType> {
         | "joint_temperatures"
         | "actual_joint_voltage"
         | "actual_current_window"
-        | "ft_raw_wrench" => Vector6d,
+        | "ft_raw_wrench"
+        | "payload_inertia" => Vector6d,
         "actual_tool_accelerometer" | "payload_cog" | "elbow_position" | "elbow_velocity" => {
             Vector3d
         }
         "joint_mode" => Vector6Int32,
-        "robot_mode" | "safety_mode" | "safety_status" | "tool_mode" => Int32,
-        "actual_digital_input_bits"
-        | "actual_digital_output_bits"
-        | "runtime_state"
+        "robot_mode" | "safety_mode" | "safety_status" | "tool_output_voltage" => Int32,
+        // 64 bits: standard, configurable and tool I/O side by side.
+        "actual_digital_input_bits" | "actual_digital_output_bits" => Uint64,
+        "runtime_state"
+        | "tool_mode"
         | "robot_status_bits"
         | "safety_status_bits"
         | "analog_io_types"
@@ -315,6 +317,14 @@ pub fn decode_values(
         values.push(value);
     }
     Ok(values)
+}
+
+/// The variable names of a setup request's comma-separated list. ur_rtde ends its lists with a
+/// comma and real controllers serve it, so a trailing comma is a terminator, not an empty name:
+/// the one empty entry it leaves is dropped (an empty name anywhere else stays, to be refused).
+pub fn recipe_names(list: &str) -> Vec<&str> {
+    let list = list.strip_suffix(',').unwrap_or(list);
+    list.split(',').collect()
 }
 
 /// Payload of a v2 output setup request: frequency and the comma-separated names.

@@ -5,7 +5,7 @@
 
 use ur_rtde::{
     Package, ValueType, decode_values, encode_value, output_type, package, parse_setup_reply,
-    setup_outputs_request,
+    recipe_names, setup_outputs_request,
 };
 
 #[test]
@@ -106,4 +106,79 @@ fn output_variable_types_follow_the_guide() {
     );
     assert_eq!(output_type("output_double_register_48"), None);
     assert_eq!(output_type("no_such_variable"), None);
+}
+
+/// The recipe ur_rtde 1.6's RTDEReceiveInterface asks a 5.11 controller for when given no
+/// variables, with the types UR's RTDE guide gives them. ur_rtde decodes data packages with its
+/// own table of these types, so a wrong size here shifts every value after it.
+#[test]
+fn ur_rtde_default_receive_recipe_has_the_guide_types() {
+    use ValueType::*;
+    let expected: &[(&str, ValueType)] = &[
+        ("timestamp", Double),
+        ("target_q", Vector6d),
+        ("target_qd", Vector6d),
+        ("target_qdd", Vector6d),
+        ("target_current", Vector6d),
+        ("target_moment", Vector6d),
+        ("actual_q", Vector6d),
+        ("actual_qd", Vector6d),
+        ("actual_current", Vector6d),
+        ("joint_control_output", Vector6d),
+        ("actual_TCP_pose", Vector6d),
+        ("actual_TCP_speed", Vector6d),
+        ("actual_TCP_force", Vector6d),
+        ("target_TCP_pose", Vector6d),
+        ("target_TCP_speed", Vector6d),
+        ("actual_digital_input_bits", Uint64),
+        ("joint_temperatures", Vector6d),
+        ("actual_execution_time", Double),
+        ("robot_mode", Int32),
+        ("joint_mode", Vector6Int32),
+        ("safety_mode", Int32),
+        ("actual_tool_accelerometer", Vector3d),
+        ("speed_scaling", Double),
+        ("target_speed_fraction", Double),
+        ("actual_momentum", Double),
+        ("actual_main_voltage", Double),
+        ("actual_robot_voltage", Double),
+        ("actual_robot_current", Double),
+        ("actual_joint_voltage", Vector6d),
+        ("actual_digital_output_bits", Uint64),
+        ("runtime_state", Uint32),
+        ("standard_analog_input0", Double),
+        ("standard_analog_input1", Double),
+        ("standard_analog_output0", Double),
+        ("standard_analog_output1", Double),
+        ("robot_status_bits", Uint32),
+        ("safety_status_bits", Uint32),
+        ("ft_raw_wrench", Vector6d),
+        ("payload", Double),
+        ("payload_cog", Vector3d),
+        ("payload_inertia", Vector6d),
+        ("output_int_register_2", Int32),
+        ("output_int_register_19", Int32),
+        ("output_double_register_12", Double),
+        ("output_double_register_19", Double),
+    ];
+    for (name, kind) in expected {
+        assert_eq!(output_type(name), Some(*kind), "{name}");
+    }
+    assert_eq!(output_type("tool_output_voltage"), Some(Int32));
+    assert_eq!(output_type("tool_mode"), Some(Uint32));
+}
+
+#[test]
+fn a_trailing_comma_ends_the_name_list_instead_of_adding_an_empty_name() {
+    // ur_rtde sends "timestamp,actual_q," (every name followed by a comma).
+    assert_eq!(
+        recipe_names("timestamp,actual_q,"),
+        ["timestamp", "actual_q"]
+    );
+    assert_eq!(
+        recipe_names("timestamp,actual_q"),
+        ["timestamp", "actual_q"]
+    );
+    // Only the terminator is dropped: a real empty name is still there to be refused.
+    assert_eq!(recipe_names("timestamp,,"), ["timestamp", ""]);
 }
