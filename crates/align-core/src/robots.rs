@@ -55,6 +55,18 @@ impl ShippedRobot {
         }
     }
 
+    /// A pose the arm can hold without reaching its limits, and a good IK seed for a table in
+    /// front of it: the UR "home" with the elbow up, the iiwa slightly bent.
+    pub fn home(self) -> Vec<f64> {
+        use std::f64::consts::FRAC_PI_2;
+        match self {
+            ShippedRobot::Iiwa14 => vec![0.0, 0.5, 0.0, -1.2, 0.0, 0.9, 0.0],
+            ShippedRobot::Ur10 | ShippedRobot::Ur10e => {
+                vec![0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0]
+            }
+        }
+    }
+
     pub fn model(self) -> Result<RobotModel, ModelError> {
         RobotModel::from_urdf_str(self.urdf(), &PackageMap::new())
     }

@@ -22,7 +22,7 @@ use crate::session::{FORMAT, PartSection, PoseSection, RobotSection, SessionFile
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
-    /// Simulated robot (ur10 or ur10e; iiwa14 needs the FRI emulation, not built yet).
+    /// Simulated robot: ur10 (RTDE, 125 Hz), ur10e (RTDE, 500 Hz) or iiwa14 (FRI, 5 ms).
     #[arg(long, default_value = "ur10")]
     pub robot: String,
     /// An effect the simulated cell has and the model does not declare: none, probe_radius
@@ -178,6 +178,21 @@ fn request(socket: &zmq::Socket, body: Value, what: &str) -> Result<Value, BadIn
     serde_json::from_slice(&reply).map_err(|error| BadInput(format!("{what}: bad reply: {error}")))
 }
 
+/// How long a touch rests in contact before it is captured: a few controller sample periods
+/// (8 ms at 125 Hz), so that the stream has caught up with the arm at rest.
+const SETTLE_S: f64 = 0.05;
+
+/// One request to sim-robot's control socket.
+fn control_request(socket: &zmq::Socket, body: &Value) -> Result<Value, BadInput> {
+    socket
+        .send(body.to_string().as_bytes(), 0)
+        .map_err(BadInput::new)?;
+    let reply = socket
+        .recv_bytes(0)
+        .map_err(|_| BadInput("sim-robot control: no reply within the timeout".to_owned()))?;
+    serde_json::from_slice(&reply).map_err(BadInput::new)
+}
+
 fn zmq_socket(
     context: &zmq::Context,
     kind: zmq::SocketType,
@@ -191,27 +206,19 @@ fn zmq_socket(
 }
 
 pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput, BadInput> {
-    let robot = match ShippedRobot::from_name(&args.robot) {
-        Some(robot @ (ShippedRobot::Ur10 | ShippedRobot::Ur10e)) => robot,
-        Some(ShippedRobot::Iiwa14) => {
-            return Err(BadInput(
-                "--robot iiwa14: the iiwa's FRI emulation and back end are not built yet"
-                    .to_owned(),
-            ));
-        }
-        None => {
-            return Err(BadInput(format!(
-                "--robot '{}': expected ur10 or ur10e",
-                args.robot
-            )));
-        }
+    let Some(robot) = ShippedRobot::from_name(&args.robot) else {
+        return Err(BadInput(format!(
+            "--robot '{}': expected ur10, ur10e or iiwa14",
+            args.robot
+        )));
     };
     let sim_program = sibling_binary("sim-robot")?;
     let bridge_program = sibling_binary("robot-bridge")?;
     let ips_program = std::env::current_exe().map_err(BadInput::new)?;
 
-    // The cell: the step block at a pose the service is not told, a nominal pose 40 mm / 6
-    // degrees off, a probe with a 3 mm ball 150 mm from the flange.
+    // The cell: the step block at a pose the service is not told, a nominal pose 42 mm / 6
+    // degrees off, a probe with a 3 mm ball 150 mm from the flange. The iiwa's reach is shorter
+    // than the UR10's: its table stands closer.
     let folder = std::env::temp_dir().join(format!("cobot-align-demo-{}", std::process::id()));
     std::fs::create_dir_all(&folder).map_err(BadInput::new)?;
     let part = step_block().map_err(BadInput::new)?;
@@ -221,8 +228,16 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     };
     write_stl_binary(&folder.join("part.stl"), &soup).map_err(BadInput::new)?;
     std::fs::write(folder.join("robot.urdf"), robot.urdf()).map_err(BadInput::new)?;
-    let truth = isometry_from_xyz_rpy([0.62, -0.25, 0.02], [0.0, 0.0, 0.35]);
-    let nominal = isometry_from_xyz_rpy([0.65, -0.22, 0.02], [0.0, 0.0, 0.25]);
+    let (truth, nominal) = match robot {
+        ShippedRobot::Iiwa14 => (
+            isometry_from_xyz_rpy([0.5, -0.2, 0.02], [0.0, 0.0, 0.35]),
+            isometry_from_xyz_rpy([0.53, -0.17, 0.02], [0.0, 0.0, 0.25]),
+        ),
+        _ => (
+            isometry_from_xyz_rpy([0.62, -0.25, 0.02], [0.0, 0.0, 0.35]),
+            isometry_from_xyz_rpy([0.65, -0.22, 0.02], [0.0, 0.0, 0.25]),
+        ),
+    };
     let tcp = isometry_from_xyz_rpy([0.0, 0.0, 0.15], [0.0; 3]);
     let tip_radius = 0.003;
     let pose = |p: &nalgebra::Isometry3<f64>| {
@@ -259,11 +274,10 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     .map_err(BadInput::new)?;
     let journal = folder.join("inspections.journal");
     let _ = std::fs::remove_file(&journal);
-    let chain = robot.chain().map_err(BadInput::new)?;
+    let dof = robot.home().len();
     // The cell as it physically is; the session above declares the nominal tool and part.
     let mut true_tcp = tcp;
-    let (mut true_radius, mut true_scale, mut encoder_offsets) =
-        (tip_radius, 1.0, vec![0.0; chain.dof()]);
+    let (mut true_radius, mut true_scale, mut encoder_offsets) = (tip_radius, 1.0, vec![0.0; dof]);
     match args.effect.as_str() {
         "none" => {}
         "probe_radius" => true_radius = 0.0034,
@@ -271,71 +285,36 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
             true_tcp.translation.vector += nalgebra::Vector3::new(0.0015, -0.001, 0.0015)
         }
         "part_scale" => true_scale = 1.004,
-        "joint_offsets" => encoder_offsets = vec![0.0, 0.0015, -0.002, 0.001, 0.0, 0.0],
+        "joint_offsets" => {
+            encoder_offsets = match robot {
+                ShippedRobot::Iiwa14 => vec![0.0, 0.0015, 0.0, -0.002, 0.0, 0.001, 0.0],
+                _ => vec![0.0, 0.0015, -0.002, 0.001, 0.0, 0.0],
+            }
+        }
         other => {
             return Err(BadInput(format!(
                 "--effect '{other}': expected none, probe_radius, tcp_offset, part_scale or joint_offsets"
             )));
         }
     }
-    let touches = if args.effect == "none" {
-        align_core::trials::probing::step_block_table_touches()
-            .into_iter()
-            .map(|(p, n)| (p, n, 0.0))
-            .collect()
-    } else {
-        align_core::trials::probing::step_block_diagnosis_touches()
-    };
-    let targets = align_core::trials::probing::tilted_joint_targets(
-        &chain,
-        &truth,
-        &true_tcp,
-        true_radius,
-        true_scale,
-        &touches,
-        &sim_robot_home(),
-    )
-    .map_err(|error| BadInput(format!("cannot plan the touches: {error}")))?;
+    // Nine touches align; a diagnosis needs more, at varied tilts (a ball-radius change and a
+    // TCP shift look alike on head-on touches).
+    let touch_count: usize = if args.effect == "none" { 9 } else { 16 };
+    let probe_request = json!({
+        "command": "probe",
+        "mesh": folder.join("part.stl"),
+        "base_from_part": pose(&truth),
+        "tcp": pose(&true_tcp),
+        "tip_radius": true_radius,
+        "part_scale": true_scale,
+        "touches": touch_count,
+        "max_tilt_rad": 0.6,
+        "vary_tilt": args.effect != "none",
+        "dwell_s": 0.3,
+    });
 
     progress("starting sim-robot, robot-bridge and the alignment service");
-    let mut sim = spawn(
-        "sim-robot",
-        &sim_program,
-        &[
-            "--robot",
-            robot.name(),
-            "--rtde-host",
-            "127.0.0.1",
-            "--rtde-port",
-            "0",
-            "--control",
-            "tcp://127.0.0.1:*",
-        ]
-        .map(str::to_owned),
-    )?;
-    let rtde_port = sim
-        .endpoint("rtde")?
-        .rsplit(':')
-        .next()
-        .unwrap_or("30004")
-        .to_owned();
-    let mut bridge = spawn(
-        "robot-bridge",
-        &bridge_program,
-        &[
-            "--backend",
-            "ur",
-            "--robot-host",
-            "127.0.0.1",
-            "--rtde-port",
-            &rtde_port,
-            "--rep",
-            "tcp://127.0.0.1:*",
-            "--pub",
-            "tcp://127.0.0.1:*",
-        ]
-        .map(str::to_owned),
-    )?;
+    let (mut sim, mut bridge) = start_cell(robot, &sim_program, &bridge_program)?;
     let (bridge_rep, bridge_pub) = (bridge.endpoint("rep")?, bridge.endpoint("pub")?);
     let mut service = spawn(
         "ips serve",
@@ -357,20 +336,17 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     let context = zmq::Context::new();
     let client = zmq_socket(&context, zmq::REQ, &service.endpoint("rep")?)?;
     let control = zmq_socket(&context, zmq::REQ, &sim.endpoint("control")?)?;
-    let sub = zmq_socket(&context, zmq::SUB, &bridge_pub)?;
-    sub.set_subscribe(b"").map_err(BadInput::new)?;
     if encoder_offsets.iter().any(|o| *o != 0.0) {
-        control
-            .send(
-                json!({"command": "effects", "joint_offsets": encoder_offsets})
-                    .to_string()
-                    .as_bytes(),
-                0,
-            )
-            .map_err(BadInput::new)?;
-        let _ = control
-            .recv_bytes(0)
-            .map_err(|_| BadInput("sim-robot control: no reply".to_owned()))?;
+        let reply = control_request(
+            &control,
+            &json!({"command": "effects", "joint_offsets": encoder_offsets}),
+        )?;
+        if reply["ok"] != true {
+            return Err(BadInput(format!(
+                "sim-robot refused the effect: {}",
+                reply["reason"]
+            )));
+        }
     }
 
     let deadline = Instant::now() + Duration::from_secs(20);
@@ -390,46 +366,67 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    for (index, q) in targets.iter().enumerate() {
-        control
-            .send(
-                json!({"command": "motion", "motion": {"kind": "hold", "q": q}})
-                    .to_string()
-                    .as_bytes(),
-                0,
-            )
-            .map_err(BadInput::new)?;
-        let reply: Value = serde_json::from_slice(
-            &control
-                .recv_bytes(0)
-                .map_err(|_| BadInput("sim-robot control: no reply".to_owned()))?,
-        )
-        .map_err(BadInput::new)?;
-        if reply["ok"] != true {
-            return Err(BadInput(format!(
-                "sim-robot refused touch {}: {}",
-                index + 1,
-                reply["reason"]
-            )));
-        }
-        // The robot is at rest at the touch once the stream shows the pose twice more.
-        let mut seen_after = None::<u32>;
-        while seen_after.is_none_or(|n| n < 2) {
-            let bytes = sub
-                .recv_bytes(0)
-                .map_err(|_| BadInput("the hardware-state stream went silent".to_owned()))?;
-            let state: Value = serde_json::from_slice(&bytes).map_err(BadInput::new)?;
-            // The stream carries what the encoders say: the true angle plus any offset.
-            let at_touch = state["body"]["position"].as_array().is_some_and(|p| {
-                p.iter()
-                    .zip(q.iter().zip(&encoder_offsets))
-                    .all(|(a, (b, o))| a.as_f64().is_some_and(|a| (a - b - o).abs() < 1e-9))
-            });
-            seen_after = match (seen_after, at_touch) {
-                (None, true) => Some(0),
-                (Some(n), _) => Some(n + 1),
-                (None, false) => None,
-            };
+    progress(&format!(
+        "sim-robot plans {touch_count} touches on the part at its hidden pose"
+    ));
+    // Planning runs dozens of IK solves per touch: give it longer than a plain request.
+    control.set_rcvtimeo(120_000).map_err(BadInput::new)?;
+    let planned = control_request(&control, &probe_request)?;
+    control.set_rcvtimeo(10_000).map_err(BadInput::new)?;
+    if planned["ok"] != true {
+        return Err(BadInput(format!(
+            "sim-robot could not probe the part: {}",
+            planned["reason"]
+        )));
+    }
+    let tilts_deg: Vec<String> = planned["tilts_rad"]
+        .as_array()
+        .map(|tilts| {
+            tilts
+                .iter()
+                .map(|t| format!("{:.0}", t.as_f64().unwrap_or(f64::NAN).to_degrees()))
+                .collect()
+        })
+        .unwrap_or_default();
+    progress(&format!(
+        "probe tilts from the normal (deg): {}",
+        tilts_deg.join(" ")
+    ));
+    for index in 0..touch_count {
+        // The simulator says when the ball rests on touch `index`; capture it then.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let status = control_request(&control, &json!({"command": "status"}))?;
+            let probe = &status["probe"];
+            // At rest by the simulator's clock; the bridge's newest sample may be one period
+            // older, so let the contact settle for a few sample periods first.
+            let settled = status["time"].as_f64().unwrap_or(0.0)
+                >= planned["contacts"][index]["from_s"]
+                    .as_f64()
+                    .unwrap_or(f64::MAX)
+                    + SETTLE_S;
+            if probe["active_touch"].as_u64() == Some(index as u64)
+                && status["at_rest"] == true
+                && settled
+            {
+                break;
+            }
+            if probe["done"] == true {
+                return Err(BadInput(format!(
+                    "sim-robot finished probing before touch {} was captured",
+                    index + 1
+                )));
+            }
+            for child in [&mut sim, &mut bridge, &mut service] {
+                child.check_alive()?;
+            }
+            if Instant::now() > deadline {
+                return Err(BadInput(format!(
+                    "touch {} did not come to rest within 60 s",
+                    index + 1
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(10));
         }
         let reply = request(&client, json!({"command": "get"}), "get")?;
         if reply["body"]["ok"] != true {
@@ -439,11 +436,7 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
                 reply["body"]["reason"]
             )));
         }
-        progress(&format!(
-            "touch {} of {} captured",
-            index + 1,
-            targets.len()
-        ));
+        progress(&format!("touch {} of {touch_count} captured", index + 1));
     }
     let aligned = request(&client, json!({"command": "align"}), "align")?;
     let saved = folder.join("captured.json");
@@ -505,7 +498,7 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         }),
         pose_error_after_diagnosis_m,
         pose_error_after_diagnosis_rad,
-        inspections: targets.len(),
+        inspections: touch_count,
         pose_error_m,
         pose_error_rad,
         nominal_error_m,
@@ -517,9 +510,78 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     })
 }
 
-fn sim_robot_home() -> Vec<f64> {
-    use std::f64::consts::FRAC_PI_2;
-    vec![0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0]
+/// Starts the simulated controller and the bridge on free ports. A UR controller serves RTDE
+/// and the bridge connects to it; an iiwa controller sends FRI to the bridge, so the bridge
+/// listens first.
+fn start_cell(
+    robot: ShippedRobot,
+    sim_program: &Path,
+    bridge_program: &Path,
+) -> Result<(ChildService, ChildService), BadInput> {
+    let zmq_endpoints = ["--rep", "tcp://127.0.0.1:*", "--pub", "tcp://127.0.0.1:*"];
+    let owned = |args: &[&str]| args.iter().map(|a| (*a).to_owned()).collect::<Vec<_>>();
+    if robot == ShippedRobot::Iiwa14 {
+        let mut bridge_args = owned(&[
+            "--backend",
+            "iiwa",
+            "--robot-host",
+            "127.0.0.1",
+            "--fri-port",
+            "0",
+        ]);
+        bridge_args.extend(owned(&zmq_endpoints));
+        let bridge = spawn("robot-bridge", bridge_program, &bridge_args)?;
+        let fri_port = bridge
+            .endpoint("fri")?
+            .rsplit(':')
+            .next()
+            .unwrap_or("30200")
+            .to_owned();
+        let sim = spawn(
+            "sim-robot",
+            sim_program,
+            &owned(&[
+                "--robot",
+                robot.name(),
+                "--fri-target",
+                &format!("127.0.0.1:{fri_port}"),
+                "--control",
+                "tcp://127.0.0.1:*",
+            ]),
+        )?;
+        return Ok((sim, bridge));
+    }
+    let sim = spawn(
+        "sim-robot",
+        sim_program,
+        &owned(&[
+            "--robot",
+            robot.name(),
+            "--rtde-host",
+            "127.0.0.1",
+            "--rtde-port",
+            "0",
+            "--control",
+            "tcp://127.0.0.1:*",
+        ]),
+    )?;
+    let rtde_port = sim
+        .endpoint("rtde")?
+        .rsplit(':')
+        .next()
+        .unwrap_or("30004")
+        .to_owned();
+    let mut bridge_args = owned(&[
+        "--backend",
+        "ur",
+        "--robot-host",
+        "127.0.0.1",
+        "--rtde-port",
+        &rtde_port,
+    ]);
+    bridge_args.extend(owned(&zmq_endpoints));
+    let bridge = spawn("robot-bridge", bridge_program, &bridge_args)?;
+    Ok((sim, bridge))
 }
 
 impl DemoOutput {

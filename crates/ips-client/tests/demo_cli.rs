@@ -42,16 +42,34 @@ fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
 }
 
 #[test]
+fn demo_on_the_iiwa_over_fri_recovers_the_hidden_pose() {
+    ensure_services_built();
+    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(["demo", "--robot", "iiwa14", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(result["robot"], "iiwa14");
+    let error_m = result["pose_error_m"].as_f64().unwrap();
+    let error_rad = result["pose_error_rad"].as_f64().unwrap();
+    assert!(error_m < 1e-4, "{error_m} m");
+    assert!(error_rad < 1e-4, "{error_rad} rad");
+    assert!(result["nominal_error_m"].as_f64().unwrap() > 0.01);
+}
+
+#[test]
 fn demo_refuses_robots_it_cannot_simulate() {
     let output = Command::new(env!("CARGO_BIN_EXE_ips"))
-        .args(["demo", "--robot", "iiwa14"])
+        .args(["demo", "--robot", "kr16"])
         .output()
         .unwrap();
     assert_eq!(output.status.code(), Some(2));
-    assert!(
-        String::from_utf8_lossy(&output.stderr)
-            .contains("FRI emulation and back end are not built yet")
-    );
+    assert!(String::from_utf8_lossy(&output.stderr).contains("expected ur10, ur10e or iiwa14"));
 }
 
 /// The simulated cell carries an undeclared effect; the demo's diagnosis must name it, estimate

@@ -29,6 +29,7 @@
 
 mod fri_server;
 pub mod motion;
+mod probing;
 mod rtde_server;
 
 use std::net::{SocketAddr, TcpListener, ToSocketAddrs, UdpSocket};
@@ -170,6 +171,8 @@ pub(crate) struct Shared {
     limits: Vec<(f64, f64)>,
     /// The FRI link as the emulated controller sees it (iiwa mode).
     fri: Mutex<Option<fri_server::LinkReport>>,
+    /// The running probe's contact windows.
+    probe: Mutex<Option<probing::Schedule>>,
 }
 
 impl Shared {
@@ -210,6 +213,18 @@ impl Shared {
             tcp_speed: [speed[0], speed[1], speed[2], speed[3], speed[4], speed[5]],
             tool_accelerometer: [up_in_tool.x, up_in_tool.y, up_in_tool.z],
         }
+    }
+
+    /// Where the scripted motion puts the joints at `time_s` (true angles).
+    fn motion_at(&self, time_s: f64) -> Vec<f64> {
+        self.motion
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .position(time_s)
+    }
+
+    fn set_motion(&self, motion: Motion) {
+        *self.motion.lock().unwrap_or_else(|p| p.into_inner()) = motion;
     }
 
     pub(crate) fn sample(&self) -> Sample {
@@ -267,16 +282,9 @@ impl Drop for SimHandle {
     }
 }
 
-/// A pose the arm can hold without reaching its limits: the UR "home" with the elbow up, the
-/// iiwa slightly bent.
+/// Where the simulated arm starts: [`ShippedRobot::home`].
 pub fn home(robot: ShippedRobot) -> Vec<f64> {
-    match robot {
-        ShippedRobot::Iiwa14 => vec![0.0, 0.5, 0.0, -1.2, 0.0, 0.9, 0.0],
-        _ => {
-            use std::f64::consts::FRAC_PI_2;
-            vec![0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0]
-        }
-    }
+    robot.home()
 }
 
 /// Starts the simulator's servers and returns their bound endpoints.
@@ -312,6 +320,7 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         chain,
         limits,
         fri: Mutex::new(None),
+        probe: Mutex::new(None),
     });
     let server = match config.robot {
         ShippedRobot::Iiwa14 => Server::Fri(fri_link(&config.fri)?),
@@ -464,13 +473,27 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
                         "local_address": link.local_address,
                     })
                 });
+            let time_s = shared.now_s();
+            let at_rest = shared
+                .motion
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .at_rest(time_s);
+            let probe = shared
+                .probe
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .as_ref()
+                .map(|schedule| schedule.report(time_s, at_rest));
             json!({
                 "ok": true,
-                "time": shared.now_s(),
+                "time": time_s,
                 "clients": shared.clients.load(Ordering::Relaxed),
                 "paused": shared.paused.load(Ordering::Relaxed),
                 "robot": robot.name(),
+                "at_rest": at_rest,
                 "fri": fri,
+                "probe": probe,
             })
         }
         Some("truth") => {
@@ -487,7 +510,9 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
         Some("motion") => match serde_json::from_value::<Motion>(request["motion"].clone()) {
             Ok(motion) => match motion.check(&shared.limits) {
                 Ok(()) => {
-                    *shared.motion.lock().unwrap_or_else(|p| p.into_inner()) = motion;
+                    shared.set_motion(motion);
+                    // A scripted motion replaces any probe run.
+                    *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = None;
                     json!({"ok": true})
                 }
                 Err(reason) => failure(reason),
@@ -514,6 +539,7 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
                 )),
             }
         }
+        Some("probe") => probing::start(&request, shared).unwrap_or_else(failure),
         Some("pause") => {
             shared.paused.store(true, Ordering::Relaxed);
             json!({"ok": true})

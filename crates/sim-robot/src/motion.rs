@@ -15,6 +15,34 @@ pub enum Motion {
         amplitude: Vec<f64>,
         period_s: f64,
     },
+    /// Joint-space moves through `waypoints` (controller times, increasing), each segment a
+    /// smooth start-stop blend q_a + (q_b - q_a) (1 - cos(pi s)) / 2; held before the first and
+    /// after the last. Two equal waypoints make a dwell.
+    Path { waypoints: Vec<Waypoint> },
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Waypoint {
+    pub time_s: f64,
+    pub q: Vec<f64>,
+}
+
+/// Where `t_s` falls on a path: the segment's ends and the phase s in [0, 1].
+fn segment(waypoints: &[Waypoint], t_s: f64) -> Option<(&Waypoint, &Waypoint, f64)> {
+    let index = waypoints.windows(2).position(|pair| t_s < pair[1].time_s)?;
+    let (a, b) = (&waypoints[index], &waypoints[index + 1]);
+    if t_s <= a.time_s {
+        return None;
+    }
+    Some((a, b, (t_s - a.time_s) / (b.time_s - a.time_s)))
+}
+
+/// The waypoint held at `t_s` outside every moving segment.
+fn held(waypoints: &[Waypoint], t_s: f64) -> Vec<f64> {
+    let last = waypoints.iter().rev().find(|w| w.time_s <= t_s);
+    last.or(waypoints.first())
+        .map(|w| w.q.clone())
+        .unwrap_or_default()
 }
 
 impl Motion {
@@ -22,6 +50,7 @@ impl Motion {
         match self {
             Motion::Hold { q } => q.len(),
             Motion::Sine { centre, .. } => centre.len(),
+            Motion::Path { waypoints } => waypoints.first().map_or(0, |w| w.q.len()),
         }
     }
 
@@ -41,7 +70,22 @@ impl Motion {
                     .map(|(c, a)| c + a * phase.sin())
                     .collect()
             }
+            Motion::Path { waypoints } => match segment(waypoints, t_s) {
+                Some((a, b, s)) => {
+                    let blend = (1.0 - (std::f64::consts::PI * s).cos()) / 2.0;
+                    a.q.iter()
+                        .zip(&b.q)
+                        .map(|(qa, qb)| qa + (qb - qa) * blend)
+                        .collect()
+                }
+                None => held(waypoints, t_s),
+            },
         }
+    }
+
+    /// Whether the joints stand still at `t_s`.
+    pub fn at_rest(&self, t_s: f64) -> bool {
+        self.velocity(t_s).iter().all(|v| *v == 0.0)
     }
 
     /// Joint velocities at controller time `t_s`, rad/s.
@@ -59,6 +103,17 @@ impl Motion {
                     .map(|a| a * omega * (omega * t_s).cos())
                     .collect()
             }
+            Motion::Path { waypoints } => match segment(waypoints, t_s) {
+                Some((a, b, s)) => {
+                    let rate = std::f64::consts::PI / (b.time_s - a.time_s);
+                    let blend_rate = (std::f64::consts::PI * s).sin() * rate / 2.0;
+                    a.q.iter()
+                        .zip(&b.q)
+                        .map(|(qa, qb)| (qb - qa) * blend_rate)
+                        .collect()
+                }
+                None => vec![0.0; self.dof()],
+            },
         }
     }
 
@@ -77,6 +132,17 @@ impl Motion {
                     .map(|a| -a * omega * omega * (omega * t_s).sin())
                     .collect()
             }
+            Motion::Path { waypoints } => match segment(waypoints, t_s) {
+                Some((a, b, s)) => {
+                    let rate = std::f64::consts::PI / (b.time_s - a.time_s);
+                    let blend_acceleration = (std::f64::consts::PI * s).cos() * rate * rate / 2.0;
+                    a.q.iter()
+                        .zip(&b.q)
+                        .map(|(qa, qb)| (qb - qa) * blend_acceleration)
+                        .collect()
+                }
+                None => vec![0.0; self.dof()],
+            },
         }
     }
 
@@ -91,6 +157,37 @@ impl Motion {
         }
         let (low, high): (Vec<f64>, Vec<f64>) = match self {
             Motion::Hold { q } => (q.clone(), q.clone()),
+            Motion::Path { waypoints } => {
+                if waypoints.is_empty() {
+                    return Err("a path needs at least one waypoint".to_owned());
+                }
+                if waypoints.iter().any(|w| w.q.len() != limits.len()) {
+                    return Err(format!(
+                        "every waypoint needs {} joint values",
+                        limits.len()
+                    ));
+                }
+                if !waypoints
+                    .windows(2)
+                    .all(|pair| pair[1].time_s > pair[0].time_s)
+                    || !waypoints.iter().all(|w| w.time_s.is_finite())
+                {
+                    return Err("waypoint times must be finite and increasing".to_owned());
+                }
+                // The blend stays between its ends, so the waypoints bound the whole path.
+                let fold = |pick: fn(f64, f64) -> f64| {
+                    (0..limits.len())
+                        .map(|j| {
+                            waypoints
+                                .iter()
+                                .map(|w| w.q[j])
+                                .reduce(pick)
+                                .unwrap_or(f64::NAN)
+                        })
+                        .collect::<Vec<f64>>()
+                };
+                (fold(f64::min), fold(f64::max))
+            }
             Motion::Sine {
                 centre,
                 amplitude,

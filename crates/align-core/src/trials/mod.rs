@@ -9,6 +9,7 @@
 
 pub mod clouds;
 pub mod parts;
+pub mod planning;
 pub mod probing;
 
 use std::time::Instant;

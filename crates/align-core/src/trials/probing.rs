@@ -81,6 +81,7 @@ pub fn tilted_joint_targets(
     touches: &[(Point3<f64>, Vector3<f64>, f64)],
     seed: &[f64],
 ) -> Result<Vec<Vec<f64>>, IkError> {
+    let start = seed;
     let mut seed = seed.to_vec();
     let mut targets = Vec::with_capacity(touches.len());
     for (point, normal, tilt) in touches {
@@ -102,11 +103,21 @@ pub fn tilted_joint_targets(
             Translation3::from(centre.coords),
             UnitQuaternion::from_rotation_matrix(&rotation),
         );
-        let solution = chain.inverse(
-            &(base_from_tcp * flange_from_tcp.inverse()),
-            &seed,
-            &IkOptions::default(),
-        )?;
+        let base_from_flange = base_from_tcp * flange_from_tcp.inverse();
+        // From the previous touch first (short moves); a redundant arm near its limits (the
+        // iiwa) may need many restarts, so failing that, from the caller's seed with more.
+        let solution = chain
+            .inverse(&base_from_flange, &seed, &IkOptions::default())
+            .or_else(|_| {
+                chain.inverse(
+                    &base_from_flange,
+                    start,
+                    &IkOptions {
+                        max_attempts: 300,
+                        ..IkOptions::default()
+                    },
+                )
+            })?;
         seed.clone_from(&solution.q);
         targets.push(solution.q);
     }

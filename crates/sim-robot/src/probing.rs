@@ -1,0 +1,193 @@
+//! The simulator probes a scene it is told about and the alignment side is not: a part mesh at a
+//! true pose, the real tool (which may differ from the declared one) and a part that may be
+//! scaled. It plans 3-2-1 touches ([`align_core::trials::planning`]) and runs them as one joint
+//! path: for each touch an approach pose, the contact, a dwell at rest in contact, and back out.
+//! The control socket's status says which touch is in contact and whether the arm is at rest.
+//! Moves between touches are joint-space blends with no collision check: a simulator only.
+
+use std::path::PathBuf;
+
+use align_core::geometry::Mesh;
+use align_core::pose::isometry_from_xyz_rpy;
+use align_core::trials::planning::{PlanOptions, plan_touches};
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+use crate::Shared;
+use crate::motion::{Motion, Waypoint};
+
+/// Joint speed of the moves between touches, rad/s (the largest joint move sets the time).
+const TRAVEL_SPEED_RAD_S: f64 = 2.0;
+const SHORTEST_MOVE_S: f64 = 0.2;
+/// The last bit into contact and back out, s.
+const CONTACT_MOVE_S: f64 = 0.25;
+
+#[derive(Debug, Clone, Deserialize)]
+pub(crate) struct PoseSpec {
+    xyz: [f64; 3],
+    rpy: [f64; 3],
+}
+
+/// The `probe` request: `{"command": "probe", "mesh": PATH, "mesh_scale": 0.001,
+/// "base_from_part": {"xyz","rpy"}, "tcp": {"xyz","rpy"}, "tip_radius": m, "part_scale": 1.0,
+/// "touches": 9, "max_tilt_rad": 0.6, "dwell_s": 0.5, "vary_tilt": false}`.
+#[derive(Debug, Clone, Deserialize)]
+pub(crate) struct ProbeRequest {
+    mesh: PathBuf,
+    #[serde(default = "one")]
+    mesh_scale: f64,
+    base_from_part: PoseSpec,
+    tcp: PoseSpec,
+    tip_radius: f64,
+    #[serde(default = "one")]
+    part_scale: f64,
+    #[serde(default = "nine")]
+    touches: usize,
+    #[serde(default = "default_tilt")]
+    max_tilt_rad: f64,
+    #[serde(default = "default_dwell")]
+    dwell_s: f64,
+    /// Vary the probe tilt from touch to touch (see `PlanOptions::vary_tilt`).
+    #[serde(default)]
+    vary_tilt: bool,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn nine() -> usize {
+    9
+}
+fn default_tilt() -> f64 {
+    0.6
+}
+fn default_dwell() -> f64 {
+    0.5
+}
+
+/// When each touch is in contact, controller time, s.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Schedule {
+    pub(crate) contacts: Vec<(f64, f64)>,
+    pub(crate) end_s: f64,
+}
+
+impl Schedule {
+    /// The status the control socket reports at `time_s`.
+    pub(crate) fn report(&self, time_s: f64, at_rest: bool) -> Value {
+        let active = self
+            .contacts
+            .iter()
+            .position(|(from, until)| (*from..*until).contains(&time_s));
+        json!({
+            "touches": self.contacts.len(),
+            "active_touch": active,
+            "at_rest": at_rest,
+            "done": time_s >= self.end_s,
+        })
+    }
+}
+
+fn finite(values: &[f64]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+/// Plans the touches and starts the path; returns the reply.
+pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
+    let request: ProbeRequest = serde_json::from_value(request.clone())
+        .map_err(|error| format!("bad probe request: {error}"))?;
+    let numbers = [
+        request.mesh_scale,
+        request.tip_radius,
+        request.part_scale,
+        request.max_tilt_rad,
+        request.dwell_s,
+    ];
+    if !finite(&numbers)
+        || !finite(&request.base_from_part.xyz)
+        || !finite(&request.base_from_part.rpy)
+        || !finite(&request.tcp.xyz)
+        || !finite(&request.tcp.rpy)
+    {
+        return Err("probe: every number must be finite".to_owned());
+    }
+    if request.mesh_scale <= 0.0 || request.part_scale <= 0.0 || request.tip_radius < 0.0 {
+        return Err("probe: mesh_scale and part_scale must be > 0, tip_radius >= 0".to_owned());
+    }
+    if !(0.0..=2.0).contains(&request.dwell_s) {
+        return Err(format!(
+            "probe: dwell_s {} is outside 0-2 s",
+            request.dwell_s
+        ));
+    }
+    let soup = align_core::io::read_mesh(&request.mesh, request.mesh_scale)
+        .map_err(|error| format!("probe: {error}"))?;
+    let mesh = Mesh::new(&soup.vertices, &soup.triangles)
+        .map_err(|error| format!("probe: {}: {error}", request.mesh.display()))?;
+    let base_from_part =
+        isometry_from_xyz_rpy(request.base_from_part.xyz, request.base_from_part.rpy);
+    let flange_from_tcp = isometry_from_xyz_rpy(request.tcp.xyz, request.tcp.rpy);
+    let start_s = shared.now_s() + 0.05;
+    let current = shared.motion_at(start_s);
+    let plan = plan_touches(
+        &mesh,
+        &base_from_part,
+        &shared.chain,
+        &flange_from_tcp,
+        request.tip_radius,
+        request.part_scale,
+        &current,
+        &PlanOptions {
+            touches: request.touches,
+            max_tilt_rad: request.max_tilt_rad,
+            vary_tilt: request.vary_tilt,
+            ..PlanOptions::default()
+        },
+    )
+    .map_err(|error| format!("probe: {error}"))?;
+    // Planning took a while: the path starts from where the arm is now.
+    let mut time_s = shared.now_s() + 0.05;
+    let mut waypoints = vec![Waypoint {
+        time_s,
+        q: shared.motion_at(time_s),
+    }];
+    let mut contacts = Vec::with_capacity(plan.len());
+    let mut push = |q: &[f64], duration_s: f64, waypoints: &mut Vec<Waypoint>| {
+        time_s += duration_s;
+        waypoints.push(Waypoint {
+            time_s,
+            q: q.to_vec(),
+        });
+        time_s
+    };
+    for touch in &plan {
+        let from = &waypoints[waypoints.len() - 1].q;
+        let largest_move = from
+            .iter()
+            .zip(&touch.q_approach)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        push(
+            &touch.q_approach,
+            (largest_move / TRAVEL_SPEED_RAD_S).max(SHORTEST_MOVE_S),
+            &mut waypoints,
+        );
+        let in_contact = push(&touch.q_contact, CONTACT_MOVE_S, &mut waypoints);
+        let leaving = push(&touch.q_contact, request.dwell_s.max(0.01), &mut waypoints);
+        contacts.push((in_contact, leaving));
+        push(&touch.q_approach, CONTACT_MOVE_S, &mut waypoints);
+    }
+    let motion = Motion::Path { waypoints };
+    motion.check(&shared.limits)?;
+    let end_s = time_s;
+    shared.set_motion(motion);
+    let reply = json!({
+        "ok": true,
+        "touches": plan.len(),
+        "end_s": end_s,
+        "contacts": contacts.iter().map(|(from, until)| json!({"from_s": from, "until_s": until})).collect::<Vec<_>>(),
+        "tilts_rad": plan.iter().map(|t| t.tilt_rad).collect::<Vec<_>>(),
+    });
+    *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = Some(Schedule { contacts, end_s });
+    Ok(reply)
+}
