@@ -83,9 +83,10 @@ fn ur_rtde_default_recipe_with_trailing_comma_is_set_up_and_streamed() {
         robot: ShippedRobot::Ur10e,
         rtde_listen: "127.0.0.1:0".to_owned(),
         control: "tcp://127.0.0.1:*".to_owned(),
+        fri: sim_robot::FriSettings::default(),
     })
     .unwrap();
-    let mut stream = TcpStream::connect(&sim.rtde_address).unwrap();
+    let mut stream = TcpStream::connect(sim.rtde_address.as_deref().unwrap()).unwrap();
     stream
         .set_read_timeout(Some(Duration::from_secs(10)))
         .unwrap();
