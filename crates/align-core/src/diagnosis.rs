@@ -14,19 +14,32 @@
 //! | `probe_radius` | ball radius change (m) | 5 mm |
 //! | `tcp_offset` | TCP shift in the flange frame (m) | 20 mm |
 //! | `joint_offsets` | encoder offset per joint but the first and last (rad) | 0.05 rad |
+//! | `joint_compliance` | gravity sag per loaded joint, q_true = q_measured + c_j tau_g_j(q) (rad/(N m)) | 5e-4 rad/(N m) |
 //! | `part_scale` | relative size change of the part about its origin | 1 % |
 //! | `trigger_latency` | delay between contact and sample (s), needs joint velocities | 0.5 s |
 //!
-//! A candidate is skipped, with the reason, when its parameters are not identifiable from these
-//! touches (the scaled information matrix is rank-deficient or has a condition number above
-//! 1e8: a joint-1 offset is the same as a part yaw), when there are too few touches, when a
-//! parameter is not significant (below 3 standard errors) or when the fit leaves its bound.
-//! Gravity sag (`joint_compliance`) is not modelled yet.
+//! `joint_compliance` uses the gravity torque tau_g_j the URDF inertials and the tool's mass at
+//! its centre of mass put on each joint ([`Chain::gravity_torques_nm`], gravity along -z of the
+//! base frame). Only joints whose largest |tau_g| over the touches reaches a tenth of the most
+//! loaded joint's are fitted: a lightly loaded wrist sags by too little to be told from noise.
+//! Its bound is a joint stiffness of 2 kN m/rad, several times softer than any arm in service.
+//!
+//! A candidate with several parameters is reduced to the ones these touches can tell apart: while
+//! the scaled information matrix is rank-deficient or has a condition number above 1e8, the
+//! parameter that weighs most in its null direction is dropped (touches along the probe axis
+//! cannot see a sideways TCP shift); while a parameter is below 3 standard errors, the weakest is
+//! dropped. What is left is reported under the effect's name, so a TCP offset seen only along the
+//! probe competes with a ball-radius change on equal terms and the two come out `ambiguous` on
+//! head-on touches. A candidate is skipped, with the reason, when even one parameter is not
+//! identifiable (a joint-1 offset is the same as a part yaw; on a compact set of configurations
+//! compliance is a constant offset the pose absorbs), when there are too few touches, when it
+//! stays below 3 standard errors (the reason gives how much of it the pose absorbs) or when the
+//! fit leaves its bound.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::geometry::Mesh;
-use crate::kinematics::Chain;
+use crate::kinematics::{Chain, PointMass};
 use crate::tool::Tool;
 
 /// One inspection as captured: joint positions and, when known, velocities.
@@ -42,15 +55,17 @@ pub enum Effect {
     ProbeRadius,
     TcpOffset,
     JointOffsets,
+    JointCompliance,
     PartScale,
     TriggerLatency,
 }
 
 impl Effect {
-    pub const ALL: [Effect; 5] = [
+    pub const ALL: [Effect; 6] = [
         Effect::ProbeRadius,
         Effect::TcpOffset,
         Effect::JointOffsets,
+        Effect::JointCompliance,
         Effect::PartScale,
         Effect::TriggerLatency,
     ];
@@ -60,16 +75,19 @@ impl Effect {
             Effect::ProbeRadius => "probe_radius",
             Effect::TcpOffset => "tcp_offset",
             Effect::JointOffsets => "joint_offsets",
+            Effect::JointCompliance => "joint_compliance",
             Effect::PartScale => "part_scale",
             Effect::TriggerLatency => "trigger_latency",
         }
     }
 
+    /// Every parameter the effect can have; a fit uses the subset the touches identify.
     fn parameter_names(self, dof: usize) -> Vec<String> {
         match self {
             Effect::ProbeRadius => vec!["delta_radius_m".to_owned()],
             Effect::TcpOffset => ["dx_m", "dy_m", "dz_m"].map(str::to_owned).to_vec(),
-            Effect::JointOffsets => (2..dof).map(|j| format!("joint_{j}_rad")).collect(),
+            Effect::JointOffsets => (1..=dof).map(|j| format!("joint_{j}_rad")).collect(),
+            Effect::JointCompliance => (1..=dof).map(|j| format!("joint_{j}_rad_per_nm")).collect(),
             Effect::PartScale => vec!["scale_minus_one".to_owned()],
             Effect::TriggerLatency => vec!["latency_s".to_owned()],
         }
@@ -80,6 +98,7 @@ impl Effect {
             Effect::ProbeRadius => 0.005,
             Effect::TcpOffset => 0.02,
             Effect::JointOffsets => 0.05,
+            Effect::JointCompliance => 5e-4,
             Effect::PartScale => 0.01,
             Effect::TriggerLatency => 0.5,
         }
@@ -144,21 +163,70 @@ struct Problem<'a> {
     touches: &'a [TouchSample],
     start: Isometry3<f64>,
     centre: Point3<f64>,
-    /// Joints whose offsets `joint_offsets` fits (indices into the chain's joints).
-    joints: Vec<usize>,
+    /// Gravity torque on each joint at each touch (N m), for `joint_compliance`.
+    gravity_torques_nm: Vec<Vec<f64>>,
+    /// Indices into the current effect's parameters of the ones being fitted.
+    active: Vec<usize>,
+}
+
+/// Why a fit cannot be reported, and for an unidentifiable one, which of the effect's fitted
+/// parameters weighs most in the direction the touches cannot see.
+struct Rejection {
+    reason: String,
+    unseen_parameter: Option<usize>,
+}
+
+impl From<String> for Rejection {
+    fn from(reason: String) -> Self {
+        Self {
+            reason,
+            unseen_parameter: None,
+        }
+    }
 }
 
 impl Problem<'_> {
     fn parameter_count(&self, effect: Option<Effect>) -> usize {
-        6 + match effect {
-            None => 0,
-            Some(Effect::ProbeRadius | Effect::PartScale | Effect::TriggerLatency) => 1,
-            Some(Effect::TcpOffset) => 3,
+        6 + if effect.is_some() {
+            self.active.len()
+        } else {
+            0
+        }
+    }
+
+    /// The parameters an effect starts from, before the touches reduce them.
+    fn initial_parameters(&self, effect: Effect) -> Vec<usize> {
+        let dof = self.chain.dof();
+        match effect {
             // The first joint's offset is a turn of the whole cell about the base axis, the same
             // as a part yaw; the last turns the ball about its own centre on a probe along the
             // flange axis: neither is visible in touches, so only the joints between are fitted.
-            Some(Effect::JointOffsets) => self.joints.len(),
+            Effect::JointOffsets => (1..dof.saturating_sub(1)).collect(),
+            Effect::JointCompliance => {
+                let largest: Vec<f64> = (0..dof)
+                    .map(|j| {
+                        self.gravity_torques_nm
+                            .iter()
+                            .fold(0.0f64, |m, torques| m.max(torques[j].abs()))
+                    })
+                    .collect();
+                let most = largest.iter().copied().fold(0.0f64, f64::max);
+                (0..dof)
+                    .filter(|&j| most > 0.0 && largest[j] >= COMPLIANCE_TORQUE_FRACTION * most)
+                    .collect()
+            }
+            Effect::TcpOffset => vec![0, 1, 2],
+            Effect::ProbeRadius | Effect::PartScale | Effect::TriggerLatency => vec![0],
         }
+    }
+
+    /// The effect's full parameter vector (inactive ones zero) from a fit's parameter vector.
+    fn effect_parameters(&self, effect: Effect, theta: &DVector<f64>) -> Vec<f64> {
+        let mut full = vec![0.0; effect.parameter_names(self.chain.dof()).len()];
+        for (k, &index) in self.active.iter().enumerate() {
+            full[index] = theta[6 + k];
+        }
+        full
     }
 
     /// The pose a parameter vector stands for: a twist about the part centre applied to the start.
@@ -181,18 +249,25 @@ impl Problem<'_> {
     ) -> DVector<f64> {
         let pose = self.pose(theta);
         let part_from_base = pose.inverse();
-        let extra = |i: usize| theta[6 + i];
+        let extras = effect.map_or_else(Vec::new, |effect| self.effect_parameters(effect, theta));
+        let extra = |i: usize| extras[i];
         let values: Vec<f64> = self
             .touches
             .iter()
             .enumerate()
             .filter(|(index, _)| Some(*index) != skip)
-            .map(|(_, touch)| {
+            .map(|(index, touch)| {
                 let mut q = touch.q.clone();
                 match effect {
                     Some(Effect::JointOffsets) => {
-                        for (k, &joint) in self.joints.iter().enumerate() {
-                            q[joint] += extra(k);
+                        q.iter_mut()
+                            .zip(&extras)
+                            .for_each(|(v, offset)| *v += offset);
+                    }
+                    Some(Effect::JointCompliance) => {
+                        let torques = &self.gravity_torques_nm[index];
+                        for ((v, compliance), torque) in q.iter_mut().zip(&extras).zip(torques) {
+                            *v += compliance * torque;
                         }
                     }
                     Some(Effect::TriggerLatency) => {
@@ -295,45 +370,29 @@ impl Problem<'_> {
         effect: Option<Effect>,
         theta: &DVector<f64>,
         sigma: f64,
-    ) -> Result<Fit, String> {
+    ) -> Result<Fit, Rejection> {
         let residual = self.residual(effect, theta, None);
         let n = residual.len();
         let k = theta.len();
         if n <= k {
-            return Err(format!("{n} touches cannot fit {k} parameters"));
+            return Err(format!("{n} touches cannot fit {k} parameters").into());
         }
-        let jacobian = self.jacobian(effect, theta, None);
-        let information = jacobian.transpose() * &jacobian;
-        // Condition of the information matrix after scaling each parameter to unit diagonal.
-        let scale = DVector::from_iterator(
-            k,
-            (0..k).map(|i| information[(i, i)].max(1e-300).sqrt().recip()),
-        );
-        let scaled = DMatrix::from_fn(k, k, |i, j| information[(i, j)] * scale[i] * scale[j]);
-        let eigen = scaled.clone().symmetric_eigen().eigenvalues;
-        let (low, high) = eigen
-            .iter()
-            .fold((f64::MAX, 0.0f64), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
-        if low <= high * 1e-8 {
-            return Err(format!(
-                "not identifiable from these touches (scaled condition number {:.1e}): it trades off with the part pose",
-                high / low.max(1e-300)
-            ));
-        }
-        let covariance = information
-            .try_inverse()
-            .ok_or("singular information matrix")?;
-        let rss = residual.norm_squared();
-        let loo = self.leave_one_out(effect);
-        let names = match effect {
-            Some(Effect::JointOffsets) => self
-                .joints
-                .iter()
-                .map(|j| format!("joint_{}_rad", j + 1))
-                .collect(),
-            Some(effect) => effect.parameter_names(self.chain.dof()),
+        let names: Vec<String> = match effect {
+            Some(effect) => {
+                let all = effect.parameter_names(self.chain.dof());
+                self.active.iter().map(|&i| all[i].clone()).collect()
+            }
             None => Vec::new(),
         };
+        let information =
+            self.jacobian(effect, theta, None).transpose() * self.jacobian(effect, theta, None);
+        identifiable(&information, &names)?;
+        let covariance = information
+            .clone()
+            .try_inverse()
+            .ok_or_else(|| "singular information matrix".to_owned())?;
+        let rss = residual.norm_squared();
+        let loo = self.leave_one_out(effect);
         let params = names
             .into_iter()
             .enumerate()
@@ -351,7 +410,10 @@ impl Problem<'_> {
             max_m: residual.iter().fold(0.0f64, |m, r| m.max(r.abs())),
             residuals_m: residual.iter().copied().collect(),
             loo_rms_m: loo,
-            bic: n as f64 * (rss / n as f64).max(1e-30).ln() + k as f64 * (n as f64).ln(),
+            // The noise is declared, not estimated: -2 log-likelihood is RSS / sigma^2. (With
+            // the variance estimated from RSS, two fits both below the noise would differ by
+            // n ln(RSS ratio), tens of units for a meaningless difference.)
+            bic: rss / (sigma * sigma) + k as f64 * (n as f64).ln(),
             params,
         })
     }
@@ -373,11 +435,187 @@ impl Problem<'_> {
     }
 }
 
+/// Fraction of the most loaded joint's largest gravity torque below which a joint's compliance
+/// is not fitted.
+const COMPLIANCE_TORQUE_FRACTION: f64 = 0.1;
+
+/// Largest scaled condition number of the information matrix at which parameters still count
+/// as identifiable.
+const CONDITION_LIMIT: f64 = 1e8;
+
+/// The information matrix scaled to unit diagonal: its condition number and null directions do
+/// not depend on the units of the parameters.
+fn scaled(information: &DMatrix<f64>) -> DMatrix<f64> {
+    let k = information.nrows();
+    let scale = DVector::from_iterator(
+        k,
+        (0..k).map(|i| information[(i, i)].max(1e-300).sqrt().recip()),
+    );
+    DMatrix::from_fn(k, k, |i, j| information[(i, j)] * scale[i] * scale[j])
+}
+
+/// Checks that the pose (first six parameters) and the effect parameters `names` are
+/// identifiable; if not, says which trade off with what.
+fn identifiable(information: &DMatrix<f64>, names: &[String]) -> Result<(), Rejection> {
+    let eigen = scaled(information).symmetric_eigen();
+    let (mut low, mut low_index, mut high) = (f64::MAX, 0, 0.0f64);
+    for (index, value) in eigen.eigenvalues.iter().enumerate() {
+        if *value < low {
+            (low, low_index) = (*value, index);
+        }
+        high = high.max(*value);
+    }
+    if low > high / CONDITION_LIMIT {
+        return Ok(());
+    }
+    // The direction the touches do not see: which parameters move together along it.
+    let null = eigen.eigenvectors.column(low_index);
+    let pose_weight: f64 = null.rows(0, 6).norm_squared();
+    let effect_weights: Vec<f64> = null.rows(6, names.len()).iter().map(|v| v * v).collect();
+    let unseen_parameter = effect_weights
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(index, _)| index);
+    let involved: Vec<&str> = names
+        .iter()
+        .zip(&effect_weights)
+        .filter(|(_, weight)| **weight > 0.05)
+        .map(|(name, _)| name.as_str())
+        .collect();
+    let partner = if pose_weight > 0.05 {
+        "the part pose"
+    } else {
+        "each other"
+    };
+    Err(Rejection {
+        reason: format!(
+            "not identifiable from these touches (scaled condition number {:.1e}): {} trade off with {partner}",
+            high / low.max(1e-300),
+            if involved.is_empty() {
+                "the pose parameters".to_owned()
+            } else {
+                involved.join(", ")
+            }
+        ),
+        unseen_parameter,
+    })
+}
+
+/// How much the variance of parameter `index` grows because the others are fitted with it
+/// (1 when it is independent of them; 100 when they absorb 99% of its signature).
+fn variance_inflation(information: &DMatrix<f64>, index: usize) -> f64 {
+    information
+        .clone()
+        .try_inverse()
+        .map_or(f64::INFINITY, |covariance| {
+            covariance[(index, index)] * information[(index, index)]
+        })
+}
+
 /// Upper 99% point of chi-square with `dof` degrees of freedom (Wilson-Hilferty).
 fn chi_square_99(dof: f64) -> f64 {
     let z = 2.326_347_874;
     let a = 2.0 / (9.0 * dof);
     dof * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// Fits one candidate effect, reduced to the parameters the touches identify (see the module
+/// docs), and accepts it or says why not.
+fn assess(
+    problem: &mut Problem,
+    effect: Effect,
+    sigma: f64,
+    pose_only_bic: f64,
+) -> Result<Fit, Alternative> {
+    let reject = |fit: Option<Fit>, reason: String| Alternative {
+        name: effect.name(),
+        fit,
+        reason,
+    };
+    problem.active = problem.initial_parameters(effect);
+    if problem.active.is_empty() {
+        return Err(reject(
+            None,
+            "no joint carries a gravity torque: the URDF has no inertials and the tool no mass"
+                .to_owned(),
+        ));
+    }
+    let (theta, fit) = loop {
+        let theta = problem.fit(Some(effect), None);
+        let summary = problem.summarise(Some(effect), &theta, sigma);
+        let reducible = problem.active.len() > 1;
+        let drop = match &summary {
+            Err(rejection) if reducible => rejection.unseen_parameter,
+            Ok(fit) if reducible => fit
+                .params
+                .iter()
+                .enumerate()
+                .map(|(k, (_, value, se))| (k, value.abs() / se.max(1e-300)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .filter(|(_, z)| *z < 3.0)
+                .map(|(k, _)| k),
+            _ => None,
+        };
+        match (drop, summary) {
+            (Some(k), _) => {
+                problem.active.remove(k);
+            }
+            (None, Ok(fit)) => break (theta, fit),
+            (None, Err(rejection)) => return Err(reject(None, rejection.reason)),
+        }
+    };
+    let out_of_bounds = fit
+        .params
+        .iter()
+        .find(|(_, value, _)| value.abs() > effect.bound());
+    // A joint cannot stiffen against gravity: a compliance that survived the significance test
+    // below zero is something else.
+    let unphysical = fit
+        .params
+        .iter()
+        .find(|(_, value, _)| effect == Effect::JointCompliance && *value < 0.0);
+    let insignificant = fit
+        .params
+        .iter()
+        .enumerate()
+        .find(|(_, (_, value, se))| value.abs() < 3.0 * se);
+    let reason = if let Some((name, value, _)) = out_of_bounds {
+        Some(format!(
+            "{name} = {value:.3e} leaves the plausibility bound {:.3e}",
+            effect.bound()
+        ))
+    } else if let Some((name, value, se)) = unphysical {
+        Some(format!(
+            "{name} = {value:.3e} +- {se:.1e} is negative: a joint does not lean against gravity"
+        ))
+    } else if let Some((k, (name, value, se))) = insignificant {
+        let jacobian = problem.jacobian(Some(effect), &theta, None);
+        let inflation = variance_inflation(&(jacobian.transpose() * &jacobian), 6 + k);
+        // Say when the cause is a confound rather than a small effect.
+        let confound = if inflation > 10.0 {
+            format!(
+                ": it trades off with the part pose (variance inflation {inflation:.0}, the pose absorbs {:.0}% of its signature)",
+                100.0 * (1.0 - inflation.recip())
+            )
+        } else {
+            String::new()
+        };
+        Some(format!(
+            "{name} = {value:.3e} is within 3 standard errors ({se:.1e}) of zero{confound}"
+        ))
+    } else if fit.bic >= pose_only_bic {
+        Some(format!(
+            "BIC {:.1} is no better than the pose-only fit's {pose_only_bic:.1}",
+            fit.bic
+        ))
+    } else {
+        None
+    };
+    match reason {
+        Some(reason) => Err(reject(Some(fit), reason)),
+        None => Ok(fit),
+    }
 }
 
 /// Diagnoses the residual of a touch alignment. `base_from_part` is the aligned pose (the start
@@ -409,6 +647,10 @@ pub fn diagnose(
             chain.dof()
         ));
     }
+    let payload = PointMass {
+        mass_kg: tool.mass_kg,
+        com_in_tip: tool.com_in_flange,
+    };
     let mut problem = Problem {
         chain,
         tool,
@@ -416,11 +658,17 @@ pub fn diagnose(
         touches,
         start: *base_from_part,
         centre: mesh.centroid(),
-        joints: (1..chain.dof().saturating_sub(1)).collect(),
+        gravity_torques_nm: touches
+            .iter()
+            .map(|touch| chain.gravity_torques_nm(&touch.q, Some(&payload)))
+            .collect(),
+        active: Vec::new(),
     };
     let sigma = noise_sigma_m;
     let baseline_theta = problem.fit(None, None);
-    let before = problem.summarise(None, &baseline_theta, sigma)?;
+    let before = problem
+        .summarise(None, &baseline_theta, sigma)
+        .map_err(|rejection| format!("the part pose alone: {}", rejection.reason))?;
     let n = touches.len() as f64;
     let statistic = before.residuals_m.iter().map(|r| r * r).sum::<f64>() / (sigma * sigma);
     let threshold = chi_square_99(n - 6.0);
@@ -451,68 +699,9 @@ pub fn diagnose(
             });
             continue;
         }
-        let mut theta = problem.fit(Some(effect), None);
-        let mut summary = problem.summarise(Some(effect), &theta, sigma);
-        // Joint offsets are fitted for the subset of joints the touches can tell apart: the
-        // least significant joint is dropped and the rest refitted while any is insignificant.
-        while effect == Effect::JointOffsets && problem.joints.len() > 1 {
-            let Ok(fit) = &summary else { break };
-            let weakest = fit
-                .params
-                .iter()
-                .enumerate()
-                .map(|(k, (_, value, se))| (k, value.abs() / se.max(1e-300)))
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            match weakest {
-                Some((k, z)) if z < 3.0 => {
-                    problem.joints.remove(k);
-                    theta = problem.fit(Some(effect), None);
-                    summary = problem.summarise(Some(effect), &theta, sigma);
-                }
-                _ => break,
-            }
-        }
-        match summary {
-            Err(reason) => alternatives.push(Alternative {
-                name: effect.name(),
-                fit: None,
-                reason,
-            }),
-            Ok(fit) => {
-                let out_of_bounds = fit
-                    .params
-                    .iter()
-                    .find(|(_, value, _)| value.abs() > effect.bound());
-                let insignificant = fit
-                    .params
-                    .iter()
-                    .find(|(_, value, se)| value.abs() < 3.0 * se);
-                let reason = if let Some((name, value, _)) = out_of_bounds {
-                    Some(format!(
-                        "{name} = {value:.3e} leaves the plausibility bound {:.3e}",
-                        effect.bound()
-                    ))
-                } else if let Some((name, value, se)) = insignificant {
-                    Some(format!(
-                        "{name} = {value:.3e} is within 3 standard errors ({se:.1e}) of zero"
-                    ))
-                } else if fit.bic >= before.bic {
-                    Some(format!(
-                        "BIC {:.1} is no better than the pose-only fit's {:.1}",
-                        fit.bic, before.bic
-                    ))
-                } else {
-                    None
-                };
-                match reason {
-                    Some(reason) => alternatives.push(Alternative {
-                        name: effect.name(),
-                        fit: Some(fit),
-                        reason,
-                    }),
-                    None => accepted.push((effect, fit)),
-                }
-            }
+        match assess(&mut problem, effect, sigma, before.bic) {
+            Ok(fit) => accepted.push((effect, fit)),
+            Err(alternative) => alternatives.push(alternative),
         }
     }
     accepted.sort_by(|a, b| a.1.bic.total_cmp(&b.1.bic));

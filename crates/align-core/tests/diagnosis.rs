@@ -141,6 +141,27 @@ fn a_larger_ball_than_declared_is_found_and_its_size_estimated() {
         diagnosis.alternatives
     );
     let (name, fit) = diagnosis.effect.clone().unwrap();
+    eprintln!(
+        "DEBUG {:#?} {:#?} {:?}",
+        fit.params,
+        diagnosis
+            .alternatives
+            .iter()
+            .map(|a| (
+                a.name,
+                a.reason.clone(),
+                a.fit.as_ref().map(|f| (f.bic, f.rms_m, f.loo_rms_m))
+            ))
+            .collect::<Vec<_>>(),
+        (
+            fit.bic,
+            fit.rms_m,
+            fit.loo_rms_m,
+            diagnosis.before.bic,
+            diagnosis.before.rms_m,
+            &fit.residuals_m
+        )
+    );
     assert_eq!(name, "probe_radius");
     let (_, estimate, stderr) = fit.params[0].clone();
     assert!(
