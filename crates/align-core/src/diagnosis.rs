@@ -93,6 +93,23 @@ impl Effect {
         }
     }
 
+    /// What a session needs for this effect to stand out from the others and from the pose.
+    fn separating_touches(self) -> &'static str {
+        match self {
+            Effect::ProbeRadius | Effect::TcpOffset => {
+                "for the ball radius and the TCP, each face touched head-on and tilted both ways"
+            }
+            Effect::JointOffsets => "for joint offsets, touches in different arm configurations",
+            Effect::JointCompliance => {
+                "for joint compliance, touches with the arm folded and stretched (different gravity loads)"
+            }
+            Effect::PartScale => {
+                "for the part's scale, faces at different distances from the part origin"
+            }
+            Effect::TriggerLatency => "for latency, touches at different approach speeds",
+        }
+    }
+
     fn bound(self) -> f64 {
         match self {
             Effect::ProbeRadius => 0.005,
@@ -218,6 +235,11 @@ impl Problem<'_> {
             Effect::TcpOffset => vec![0, 1, 2],
             Effect::ProbeRadius | Effect::PartScale | Effect::TriggerLatency => vec![0],
         }
+    }
+
+    fn active_names(&self, effect: Effect) -> Vec<String> {
+        let all = effect.parameter_names(self.chain.dof());
+        self.active.iter().map(|&i| all[i].clone()).collect()
     }
 
     /// The effect's full parameter vector (inactive ones zero) from a fit's parameter vector.
@@ -377,16 +399,10 @@ impl Problem<'_> {
         if n <= k {
             return Err(format!("{n} touches cannot fit {k} parameters").into());
         }
-        let names: Vec<String> = match effect {
-            Some(effect) => {
-                let all = effect.parameter_names(self.chain.dof());
-                self.active.iter().map(|&i| all[i].clone()).collect()
-            }
-            None => Vec::new(),
-        };
+        let names = effect.map_or_else(Vec::new, |effect| self.active_names(effect));
         let information =
             self.jacobian(effect, theta, None).transpose() * self.jacobian(effect, theta, None);
-        identifiable(&information, &names)?;
+        identifiable(&information, &names, effect.map_or(1.0, Effect::bound))?;
         let covariance = information
             .clone()
             .try_inverse()
@@ -439,6 +455,15 @@ impl Problem<'_> {
 /// is not fitted.
 const COMPLIANCE_TORQUE_FRACTION: f64 = 0.1;
 
+/// BIC margin below which a second candidate counts as explaining the residual as well as the
+/// best: 6 is "strong" evidence (a likelihood ratio of 20), so an `effect` verdict means the
+/// data favour it at least 20:1 over every other candidate.
+const AMBIGUITY_BIC: f64 = 6.0;
+
+/// Variance inflation above which an effect parameter counts as absorbed by the pose (see
+/// [`absorbed`]).
+const POSE_ABSORPTION_LIMIT: f64 = 100.0;
+
 /// Largest scaled condition number of the information matrix at which parameters still count
 /// as identifiable.
 const CONDITION_LIMIT: f64 = 1e8;
@@ -454,9 +479,31 @@ fn scaled(information: &DMatrix<f64>) -> DMatrix<f64> {
     DMatrix::from_fn(k, k, |i, j| information[(i, j)] * scale[i] * scale[j])
 }
 
+/// An effect parameter that would change the touches' residuals by less than a thousandth of
+/// the noise even at its plausibility bound is not seen at all (a sideways TCP shift under
+/// head-on touches). It has to be caught before the scaled condition number: scaling its
+/// column of rounding noise to unit length would make it look correlated with anything.
+fn invisible(
+    information: &DMatrix<f64>,
+    names: &[String],
+    bound: f64,
+    sigma: f64,
+) -> Option<Rejection> {
+    let (index, change_m) = (0..names.len())
+        .map(|i| (i, information[(6 + i, 6 + i)].max(0.0).sqrt() * bound))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    (change_m < 1e-3 * sigma).then(|| Rejection {
+        reason: format!(
+            "not identifiable from these touches: {} at its bound {bound:.1e} would move them by {change_m:.1e} m in all",
+            names[index]
+        ),
+        unseen_parameter: Some(index),
+    })
+}
+
 /// Checks that the pose (first six parameters) and the effect parameters `names` are
 /// identifiable; if not, says which trade off with what.
-fn identifiable(information: &DMatrix<f64>, names: &[String]) -> Result<(), Rejection> {
+fn identifiable(information: &DMatrix<f64>, names: &[String], bound: f64) -> Result<(), Rejection> {
     let eigen = scaled(information).symmetric_eigen();
     let (mut low, mut low_index, mut high) = (f64::MAX, 0, 0.0f64);
     for (index, value) in eigen.eigenvalues.iter().enumerate() {
@@ -472,10 +519,21 @@ fn identifiable(information: &DMatrix<f64>, names: &[String]) -> Result<(), Reje
     let null = eigen.eigenvectors.column(low_index);
     let pose_weight: f64 = null.rows(0, 6).norm_squared();
     let effect_weights: Vec<f64> = null.rows(6, names.len()).iter().map(|v| v * v).collect();
-    let unseen_parameter = effect_weights
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
+    // The parameter to give up is the one whose own signature, at its plausibility bound and
+    // beyond what the others reproduce, moves the touches least. Not the largest component of
+    // the null eigenvector: when two parameters are unseen, that vector is any mix of them and
+    // of what they trade off with; and not the unexplained fraction alone: a faint but real
+    // signature scaled to unit length trades off with anything.
+    let matrix = scaled(information);
+    let unseen_parameter = (0..names.len())
+        .map(|i| {
+            let size_at_bound = information[(6 + i, 6 + i)].max(0.0).sqrt() * bound;
+            (
+                i,
+                size_at_bound * unexplained_fraction(&matrix, 6 + i).sqrt(),
+            )
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(index, _)| index);
     let involved: Vec<&str> = names
         .iter()
@@ -502,6 +560,71 @@ fn identifiable(information: &DMatrix<f64>, names: &[String]) -> Result<(), Reje
     })
 }
 
+/// Rejects the effect parameter the pose (and the other parameters) absorb most when they
+/// reproduce more than 1 - 1/POSE_ABSORPTION_LIMIT (99%) of its signature: its estimate would
+/// then rest on a sliver of its signature, which an unmodelled effect a hundredth its size would
+/// swamp; and under `no_effect` such an effect could shift the part pose by ten times what the
+/// residual shows without being noticed.
+fn absorbed(
+    information: &DMatrix<f64>,
+    names: &[String],
+    separating_touches: &str,
+) -> Result<(), Rejection> {
+    let Some((index, inflation)) = (0..names.len())
+        .map(|i| (i, variance_inflation(information, 6 + i)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+    else {
+        return Ok(());
+    };
+    if inflation <= POSE_ABSORPTION_LIMIT {
+        return Ok(());
+    }
+    // Name the partner: the pose alone, or the pose with the effect's other parameters.
+    let with_pose_only = DMatrix::from_fn(7, 7, |a, b| {
+        let map = |i: usize| if i < 6 { i } else { 6 + index };
+        information[(map(a), map(b))]
+    });
+    let partner = if variance_inflation(&with_pose_only, 6) * 2.0 >= inflation {
+        "the part pose".to_owned()
+    } else {
+        let others: Vec<&str> = names
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != index)
+            .map(|(_, name)| name.as_str())
+            .collect();
+        format!("the part pose and {}", others.join(", "))
+    };
+    Err(Rejection {
+        reason: format!(
+            "not identifiable from these touches: {} trades off with {partner}, which reproduce {:.2}% of its signature (variance inflation {inflation:.0}); {separating_touches} would separate them",
+            names[index],
+            100.0 * (1.0 - inflation.recip())
+        ),
+        unseen_parameter: Some(index),
+    })
+}
+
+/// The part of parameter `index`'s signature the other parameters cannot reproduce, 0 to 1,
+/// from the information matrix scaled to unit diagonal (a Schur complement; the others may be
+/// degenerate among themselves, hence the pseudo-inverse).
+fn unexplained_fraction(scaled_information: &DMatrix<f64>, index: usize) -> f64 {
+    let k = scaled_information.nrows();
+    let others: Vec<usize> = (0..k).filter(|&j| j != index).collect();
+    let block = DMatrix::from_fn(others.len(), others.len(), |a, b| {
+        scaled_information[(others[a], others[b])]
+    });
+    let cross = DVector::from_iterator(
+        others.len(),
+        others.iter().map(|&j| scaled_information[(j, index)]),
+    );
+    let explained = block
+        .svd(true, true)
+        .solve(&cross, 1e-12)
+        .map_or(0.0, |weights| cross.dot(&weights));
+    (scaled_information[(index, index)] - explained).max(0.0)
+}
+
 /// How much the variance of parameter `index` grows because the others are fitted with it
 /// (1 when it is independent of them; 100 when they absorb 99% of its signature).
 fn variance_inflation(information: &DMatrix<f64>, index: usize) -> f64 {
@@ -520,6 +643,40 @@ fn chi_square_99(dof: f64) -> f64 {
     dof * (1.0 - a + z * a.sqrt()).powi(3)
 }
 
+/// Sets the problem's active parameters of `effect` to the ones these touches can identify, or
+/// says why none can be.
+///
+/// What the touches can see is a property of where they are, judged at the declared model where
+/// small effects live: a fit first would wander along an unseen direction until the geometry
+/// turns nonlinear (a 2 cm sideways TCP shift reaches an edge) and seems to see it.
+fn reduce_to_identifiable(problem: &mut Problem, effect: Effect, sigma: f64) -> Result<(), String> {
+    problem.active = problem.initial_parameters(effect);
+    if problem.active.is_empty() {
+        return Err(
+            "no joint carries a gravity torque: the URDF has no inertials and the tool no mass"
+                .to_owned(),
+        );
+    }
+    loop {
+        let nominal = DVector::zeros(problem.parameter_count(Some(effect)));
+        let jacobian = problem.jacobian(Some(effect), &nominal, None);
+        let names = problem.active_names(effect);
+        let information = jacobian.transpose() * &jacobian;
+        let check = invisible(&information, &names, effect.bound(), sigma)
+            .map_or_else(|| identifiable(&information, &names, effect.bound()), Err)
+            .and_then(|()| absorbed(&information, &names, effect.separating_touches()));
+        match check {
+            Ok(()) => return Ok(()),
+            Err(rejection) => match rejection.unseen_parameter {
+                Some(k) if problem.active.len() > 1 => {
+                    problem.active.remove(k);
+                }
+                _ => return Err(rejection.reason),
+            },
+        }
+    }
+}
+
 /// Fits one candidate effect, reduced to the parameters the touches identify (see the module
 /// docs), and accepts it or says why not.
 fn assess(
@@ -533,14 +690,7 @@ fn assess(
         fit,
         reason,
     };
-    problem.active = problem.initial_parameters(effect);
-    if problem.active.is_empty() {
-        return Err(reject(
-            None,
-            "no joint carries a gravity torque: the URDF has no inertials and the tool no mass"
-                .to_owned(),
-        ));
-    }
+    reduce_to_identifiable(problem, effect, sigma).map_err(|reason| reject(None, reason))?;
     let (theta, fit) = loop {
         let theta = problem.fit(Some(effect), None);
         let summary = problem.summarise(Some(effect), &theta, sigma);
@@ -672,22 +822,40 @@ pub fn diagnose(
     let n = touches.len() as f64;
     let statistic = before.residuals_m.iter().map(|r| r * r).sum::<f64>() / (sigma * sigma);
     let threshold = chi_square_99(n - 6.0);
+    let has_velocities = touches
+        .iter()
+        .all(|t| t.qd.as_ref().is_some_and(|qd| qd.iter().any(|v| *v != 0.0)));
+    let candidates: Vec<Effect> = Effect::ALL
+        .into_iter()
+        .filter(|effect| *effect != Effect::TriggerLatency || has_velocities)
+        .collect();
     if statistic <= threshold {
+        // Nothing to fit; but say which effects these touches could not have revealed, so that
+        // "no effect" is not read as "no compliance" on a session that cannot see it.
+        let alternatives = candidates
+            .iter()
+            .filter_map(|&effect| {
+                reduce_to_identifiable(&mut problem, effect, sigma)
+                    .err()
+                    .map(|reason| Alternative {
+                        name: effect.name(),
+                        fit: None,
+                        reason: format!("would go unseen: {reason}"),
+                    })
+            })
+            .collect();
         return Ok(Diagnosis {
             verdict: Verdict::NoEffect,
             effect: None,
             after: before.clone(),
             before,
-            alternatives: Vec::new(),
+            alternatives,
             chi_square: (statistic, threshold),
             explanation: format!(
                 "the pose-only residual is what the declared noise explains (chi-square {statistic:.1} <= {threshold:.1} at 99%)"
             ),
         });
     }
-    let has_velocities = touches
-        .iter()
-        .all(|t| t.qd.as_ref().is_some_and(|qd| qd.iter().any(|v| *v != 0.0)));
     let mut accepted: Vec<(Effect, Fit)> = Vec::new();
     let mut alternatives = Vec::new();
     for effect in Effect::ALL {
@@ -743,16 +911,27 @@ pub fn diagnose(
             ),
         });
     }
-    let rival = accepted.get(1).filter(|(_, fit)| fit.bic - best.bic < 2.0);
+    let rivals: Vec<Effect> = accepted
+        .iter()
+        .skip(1)
+        .filter(|(_, fit)| fit.bic - best.bic < AMBIGUITY_BIC)
+        .map(|(effect, _)| *effect)
+        .collect();
     let after_statistic = best.residuals_m.iter().map(|r| r * r).sum::<f64>() / (sigma * sigma);
     let after_threshold = chi_square_99(n - 6.0 - best.params.len() as f64);
-    let (verdict, explanation, applied) = if let Some((other, _)) = rival {
+    let (verdict, explanation, applied) = if !rivals.is_empty() {
+        let tied: Vec<Effect> = std::iter::once(best_effect).chain(rivals).collect();
         (
             Verdict::Ambiguous,
             format!(
-                "{} and {} explain the residual about equally well (BIC within 2); touches that separate them: for probe radius vs TCP offset, touches tilted differently on one face; for scale, touches far from the part origin on opposite faces; for joint offsets, touches in different arm configurations",
-                best_effect.name(),
-                other.name()
+                "{} explain the residual about equally well (BIC within {AMBIGUITY_BIC}); touches that would separate them: {}",
+                tied.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+                {
+                    let mut hints: Vec<&str> =
+                        tied.iter().map(|e| e.separating_touches()).collect();
+                    hints.dedup();
+                    hints.join("; ")
+                }
             ),
             // Which one to apply is unknown: keep the pose-only result.
             false,
