@@ -7,34 +7,43 @@
 //! freedom when nothing is missing. If the test rejects that (99%), each candidate effect, a
 //! small parameterised change of the model, is fitted together with the part pose by
 //! Levenberg-Marquardt on the re-projected signed distances, and the candidates are ranked by
-//! BIC and leave-one-out error:
+//! BIC (with the declared noise: RSS / sigma^2 + k ln N); each fit also reports its
+//! leave-one-out RMS.
 //!
 //! | effect | parameters | plausibility bound |
 //! | --- | --- | --- |
 //! | `probe_radius` | ball radius change (m) | 5 mm |
 //! | `tcp_offset` | TCP shift in the flange frame (m) | 20 mm |
 //! | `joint_offsets` | encoder offset per joint but the first and last (rad) | 0.05 rad |
-//! | `joint_compliance` | gravity sag per loaded joint, q_true = q_measured + c_j tau_g_j(q) (rad/(N m)) | 5e-4 rad/(N m) |
+//! | `joint_compliance` | gravity sag per loaded joint: q_true = q_measured + c_j tau_g_j(q), c_j in rad/(N m) | 0 to 5e-4 rad/(N m) |
 //! | `part_scale` | relative size change of the part about its origin | 1 % |
 //! | `trigger_latency` | delay between contact and sample (s), needs joint velocities | 0.5 s |
 //!
-//! `joint_compliance` uses the gravity torque tau_g_j the URDF inertials and the tool's mass at
-//! its centre of mass put on each joint ([`Chain::gravity_torques_nm`], gravity along -z of the
-//! base frame). Only joints whose largest |tau_g| over the touches reaches a tenth of the most
-//! loaded joint's are fitted: a lightly loaded wrist sags by too little to be told from noise.
-//! Its bound is a joint stiffness of 2 kN m/rad, several times softer than any arm in service.
+//! `joint_compliance` uses the gravity torque tau_g_j that the URDF inertials and the tool's
+//! mass at its centre of mass put on each joint ([`Chain::gravity_torques_nm`], gravity
+//! 9.80665 m/s^2 along -z of the base frame), evaluated at the measured joint vector. Only joints
+//! whose largest |tau_g| over the touches reaches a tenth of the most loaded joint's are fitted:
+//! a lightly loaded wrist sags too little to be told from noise, and a vertical base axis
+//! carries none. A compliance must be positive (a joint yields to gravity) and below 5e-4
+//! rad/(N m), a stiffness of 2 kN m/rad, several times softer than any arm in service.
 //!
-//! A candidate with several parameters is reduced to the ones these touches can tell apart: while
-//! the scaled information matrix is rank-deficient or has a condition number above 1e8, the
-//! parameter that weighs most in its null direction is dropped (touches along the probe axis
-//! cannot see a sideways TCP shift); while a parameter is below 3 standard errors, the weakest is
-//! dropped. What is left is reported under the effect's name, so a TCP offset seen only along the
-//! probe competes with a ball-radius change on equal terms and the two come out `ambiguous` on
-//! head-on touches. A candidate is skipped, with the reason, when even one parameter is not
-//! identifiable (a joint-1 offset is the same as a part yaw; on a compact set of configurations
-//! compliance is a constant offset the pose absorbs), when there are too few touches, when it
-//! stays below 3 standard errors (the reason gives how much of it the pose absorbs) or when the
-//! fit leaves its bound.
+//! Before fitting, each candidate is reduced to the parameters these touches can identify,
+//! judged at the declared model: a parameter that would move no touch by a thousandth of the
+//! noise even at its bound (a sideways TCP shift under head-on touches), then while the scaled
+//! information matrix has a condition number above 1e8 the parameter whose own signature moves
+//! the touches least, then while the pose and the other parameters reproduce more than 99% of
+//! a parameter's signature (variance inflation above 100) that parameter, is dropped. After
+//! fitting, the weakest parameter is dropped while one is below 3 standard errors. What is left
+//! competes under the effect's name, so a TCP offset seen only along the probe meets a
+//! ball-radius change on equal terms and the two come out `ambiguous` on head-on touches. A
+//! candidate is skipped, with the reason, when not even one parameter is identifiable (a joint-1
+//! offset is a part yaw; on a compact set of arm configurations a sag or an encoder offset is a
+//! rigid motion the pose absorbs), when there are too few touches, when it stays below 3
+//! standard errors (the reason says how much of it the pose absorbs) or when the fit leaves its
+//! bound. Candidates within 6 of the best BIC (a likelihood ratio of 20) make the verdict
+//! `ambiguous`, listing them all and the touches that would separate them; the pose is then
+//! left as the pose-only fit has it. Under `no_effect`, the alternatives list the effects these
+//! touches could not have revealed.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
@@ -187,7 +196,7 @@ struct Problem<'a> {
 }
 
 /// Why a fit cannot be reported, and for an unidentifiable one, which of the effect's fitted
-/// parameters weighs most in the direction the touches cannot see.
+/// parameters to give up first.
 struct Rejection {
     reason: String,
     unseen_parameter: Option<usize>,
@@ -504,7 +513,8 @@ fn invisible(
 /// Checks that the pose (first six parameters) and the effect parameters `names` are
 /// identifiable; if not, says which trade off with what.
 fn identifiable(information: &DMatrix<f64>, names: &[String], bound: f64) -> Result<(), Rejection> {
-    let eigen = scaled(information).symmetric_eigen();
+    let scaled_information = scaled(information);
+    let eigen = scaled_information.clone().symmetric_eigen();
     let (mut low, mut low_index, mut high) = (f64::MAX, 0, 0.0f64);
     for (index, value) in eigen.eigenvalues.iter().enumerate() {
         if *value < low {
@@ -524,13 +534,12 @@ fn identifiable(information: &DMatrix<f64>, names: &[String], bound: f64) -> Res
     // the null eigenvector: when two parameters are unseen, that vector is any mix of them and
     // of what they trade off with; and not the unexplained fraction alone: a faint but real
     // signature scaled to unit length trades off with anything.
-    let matrix = scaled(information);
     let unseen_parameter = (0..names.len())
         .map(|i| {
             let size_at_bound = information[(6 + i, 6 + i)].max(0.0).sqrt() * bound;
             (
                 i,
-                size_at_bound * unexplained_fraction(&matrix, 6 + i).sqrt(),
+                size_at_bound * unexplained_fraction(&scaled_information, 6 + i).sqrt(),
             )
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
@@ -677,20 +686,23 @@ fn reduce_to_identifiable(problem: &mut Problem, effect: Effect, sigma: f64) -> 
     }
 }
 
+/// A candidate effect's fate.
+enum Assessment {
+    Accepted(Fit),
+    Rejected(Alternative),
+}
+
 /// Fits one candidate effect, reduced to the parameters the touches identify (see the module
 /// docs), and accepts it or says why not.
-fn assess(
-    problem: &mut Problem,
-    effect: Effect,
-    sigma: f64,
-    pose_only_bic: f64,
-) -> Result<Fit, Alternative> {
+fn assess(problem: &mut Problem, effect: Effect, sigma: f64, pose_only_bic: f64) -> Assessment {
     let reject = |fit: Option<Fit>, reason: String| Alternative {
         name: effect.name(),
         fit,
         reason,
     };
-    reduce_to_identifiable(problem, effect, sigma).map_err(|reason| reject(None, reason))?;
+    if let Err(reason) = reduce_to_identifiable(problem, effect, sigma) {
+        return Assessment::Rejected(reject(None, reason));
+    }
     let (theta, fit) = loop {
         let theta = problem.fit(Some(effect), None);
         let summary = problem.summarise(Some(effect), &theta, sigma);
@@ -712,7 +724,7 @@ fn assess(
                 problem.active.remove(k);
             }
             (None, Ok(fit)) => break (theta, fit),
-            (None, Err(rejection)) => return Err(reject(None, rejection.reason)),
+            (None, Err(rejection)) => return Assessment::Rejected(reject(None, rejection.reason)),
         }
     };
     let out_of_bounds = fit
@@ -763,8 +775,8 @@ fn assess(
         None
     };
     match reason {
-        Some(reason) => Err(reject(Some(fit), reason)),
-        None => Ok(fit),
+        Some(reason) => Assessment::Rejected(reject(Some(fit), reason)),
+        None => Assessment::Accepted(fit),
     }
 }
 
@@ -868,8 +880,8 @@ pub fn diagnose(
             continue;
         }
         match assess(&mut problem, effect, sigma, before.bic) {
-            Ok(fit) => accepted.push((effect, fit)),
-            Err(alternative) => alternatives.push(alternative),
+            Assessment::Accepted(fit) => accepted.push((effect, fit)),
+            Assessment::Rejected(alternative) => alternatives.push(alternative),
         }
     }
     accepted.sort_by(|a, b| a.1.bic.total_cmp(&b.1.bic));

@@ -5,6 +5,8 @@
 //! improve the part pose. Effects outside the library must never be confidently misattributed,
 //! and the known confounds must be reported as such.
 
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
 use align_core::diagnosis::{Diagnosis, TouchSample, Verdict, diagnose};
 use align_core::geometry::Mesh;
 use align_core::kinematics::{Chain, PointMass};
@@ -69,6 +71,9 @@ struct Hidden {
     /// (joint index, amplitude rad, cycles per turn): q_read = q + a sin(n q), not in the
     /// library.
     cyclic_encoder_error: Option<(usize, f64, f64)>,
+    /// (joint index, rad): gear backlash, the encoder leads the link by this much in the
+    /// direction the joint moves; not in the library.
+    backlash_rad: Option<(usize, f64)>,
 }
 
 fn ur10_tool() -> Tool {
@@ -114,37 +119,20 @@ fn three_ways(plan: &Plan) -> Plan {
 /// Touches on the top and the four sides of an axis-aligned box centred on its origin, each
 /// face touched at `per_face` points spread over it, with tilts cycling through `tilts_rad`.
 fn box_plan(size_m: [f64; 3], per_face: usize, tilts_rad: &[f64]) -> Plan {
-    let [hx, hy, hz] = size_m.map(|s| s / 2.0);
+    let half = Vector3::from(size_m) / 2.0;
+    let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+    // Each face: its outward normal and the two directions spanning it.
+    let faces = [(z, x, y), (x, y, z), (-x, y, z), (y, x, z), (-y, x, z)];
+    let spot = |k: usize| -0.6 + 1.2 * (k as f64 + 0.5) / per_face as f64;
     let mut plan = Vec::new();
-    let spots = |k: usize| -0.6 + 1.2 * (k as f64 + 0.5) / per_face as f64;
-    let faces: [(Vector3<f64>, Box<dyn Fn(f64, f64) -> Point3<f64>>); 5] = [
-        (
-            Vector3::z(),
-            Box::new(|u, v| Point3::new(u * hx, v * hy, hz)),
-        ),
-        (
-            Vector3::x(),
-            Box::new(|u, v| Point3::new(hx, u * hy, v * hz)),
-        ),
-        (
-            -Vector3::x(),
-            Box::new(|u, v| Point3::new(-hx, u * hy, v * hz)),
-        ),
-        (
-            Vector3::y(),
-            Box::new(|u, v| Point3::new(u * hx, hy, v * hz)),
-        ),
-        (
-            -Vector3::y(),
-            Box::new(|u, v| Point3::new(u * hx, -hy, v * hz)),
-        ),
-    ];
-    for (normal, point) in &faces {
+    for (normal, across, up) in faces {
         for k in 0..per_face {
-            let u = spots(k);
-            let v = spots((k * 7 + 3) % per_face) * 0.8;
+            let (u, v) = (spot(k), spot((k * 7 + 3) % per_face) * 0.8);
+            let point = normal.component_mul(&half)
+                + across.component_mul(&half) * u
+                + up.component_mul(&half) * v;
             let tilt = tilts_rad[plan.len() % tilts_rad.len()];
-            plan.push((point(u, v), *normal, tilt));
+            plan.push((Point3::from(point), normal, tilt));
         }
     }
     plan
@@ -232,6 +220,9 @@ fn measure(cell: &Cell, hidden: &Hidden, rng: &mut TrialRng) -> Vec<TouchSample>
             }
             if let Some((joint, amplitude, cycles)) = hidden.cyclic_encoder_error {
                 q[joint] += amplitude * (cycles * q_true[joint]).sin();
+            }
+            if let Some((joint, backlash)) = hidden.backlash_rad {
+                q[joint] += backlash * qd[joint].signum();
             }
             // The reading q satisfies q_true = q + c tau(q): a few fixed-point steps.
             let sagging = q.clone();
@@ -633,7 +624,7 @@ fn compact_configurations_cannot_tell_joint_compliance_or_offsets_from_the_part_
 fn effects_outside_the_library_are_never_confidently_misattributed() {
     let cell = step_block_cell();
     let cases = [
-        // A second-harmonic-per-8-turns encoder error on the elbow.
+        // An encoder error of 8 cycles per turn on the elbow.
         Hidden {
             cyclic_encoder_error: Some((2, 1e-3, 8.0)),
             ..Hidden::default()
@@ -641,6 +632,11 @@ fn effects_outside_the_library_are_never_confidently_misattributed() {
         // The same on the shoulder, faster.
         Hidden {
             cyclic_encoder_error: Some((1, 6e-4, 23.0)),
+            ..Hidden::default()
+        },
+        // Backlash on the elbow: which way it shows depends on how the joint arrives.
+        Hidden {
+            backlash_rad: Some((2, 1e-3)),
             ..Hidden::default()
         },
     ];
