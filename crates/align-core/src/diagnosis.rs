@@ -357,7 +357,16 @@ impl Problem<'_> {
 
     /// Levenberg-Marquardt with Marquardt's diagonal scaling.
     fn fit(&self, effect: Option<Effect>, skip: Option<usize>) -> DVector<f64> {
-        let mut theta = DVector::zeros(self.parameter_count(effect));
+        self.fit_from(effect, skip, DVector::zeros(self.parameter_count(effect)))
+    }
+
+    /// Levenberg-Marquardt from `theta`.
+    fn fit_from(
+        &self,
+        effect: Option<Effect>,
+        skip: Option<usize>,
+        mut theta: DVector<f64>,
+    ) -> DVector<f64> {
         let mut residual = self.residual(effect, &theta, skip);
         let mut cost = residual.norm_squared();
         let mut lambda = 1e-3;
@@ -417,7 +426,7 @@ impl Problem<'_> {
             .try_inverse()
             .ok_or_else(|| "singular information matrix".to_owned())?;
         let rss = residual.norm_squared();
-        let loo = self.leave_one_out(effect);
+        let loo = self.leave_one_out(effect, theta);
         let params = names
             .into_iter()
             .enumerate()
@@ -443,16 +452,17 @@ impl Problem<'_> {
         })
     }
 
-    /// RMS of each touch's residual predicted by a fit without it.
-    fn leave_one_out(&self, effect: Option<Effect>) -> f64 {
+    /// RMS of each touch's residual predicted by a fit without it. Each of those fits starts
+    /// from `theta`, the fit with every touch, which one touch less moves only a little.
+    fn leave_one_out(&self, effect: Option<Effect>, theta: &DVector<f64>) -> f64 {
         let n = self.touches.len();
         if n <= self.parameter_count(effect) + 1 {
             return f64::NAN;
         }
         let sum: f64 = (0..n)
             .map(|held| {
-                let theta = self.fit(effect, Some(held));
-                let all = self.residual(effect, &theta, None);
+                let without = self.fit_from(effect, Some(held), theta.clone());
+                let all = self.residual(effect, &without, None);
                 all[held] * all[held]
             })
             .sum();
