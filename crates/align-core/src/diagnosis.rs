@@ -426,7 +426,6 @@ impl Problem<'_> {
             .try_inverse()
             .ok_or_else(|| "singular information matrix".to_owned())?;
         let rss = residual.norm_squared();
-        let loo = self.leave_one_out(effect, theta);
         let params = names
             .into_iter()
             .enumerate()
@@ -443,7 +442,8 @@ impl Problem<'_> {
             rms_m: (rss / n as f64).sqrt(),
             max_m: residual.iter().fold(0.0f64, |m, r| m.max(r.abs())),
             residuals_m: residual.iter().copied().collect(),
-            loo_rms_m: loo,
+            // Costs a fit per touch: filled in once the candidate's parameters are settled.
+            loo_rms_m: f64::NAN,
             // The noise is declared, not estimated: -2 log-likelihood is RSS / sigma^2. (With
             // the variance estimated from RSS, two fits both below the noise would differ by
             // n ln(RSS ratio), tens of units for a meaningless difference.)
@@ -733,7 +733,10 @@ fn assess(problem: &mut Problem, effect: Effect, sigma: f64, pose_only_bic: f64)
             (Some(k), _) => {
                 problem.active.remove(k);
             }
-            (None, Ok(fit)) => break (theta, fit),
+            (None, Ok(mut fit)) => {
+                fit.loo_rms_m = problem.leave_one_out(Some(effect), &theta);
+                break (theta, fit);
+            }
             (None, Err(rejection)) => return Assessment::Rejected(reject(None, rejection.reason)),
         }
     };
@@ -838,9 +841,10 @@ pub fn diagnose(
     };
     let sigma = noise_sigma_m;
     let baseline_theta = problem.fit(None, None);
-    let before = problem
+    let mut before = problem
         .summarise(None, &baseline_theta, sigma)
         .map_err(|rejection| format!("the part pose alone: {}", rejection.reason))?;
+    before.loo_rms_m = problem.leave_one_out(None, &baseline_theta);
     let n = touches.len() as f64;
     let statistic = before.residuals_m.iter().map(|r| r * r).sum::<f64>() / (sigma * sigma);
     let threshold = chi_square_99(n - 6.0);

@@ -24,18 +24,14 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector3, Vector6};
 const SIGMA_M: f64 = 5e-5;
 
 /// The library's effect names (DESIGN 6.4).
-struct Effect;
-
-impl Effect {
-    const ALL_NAMES: [&'static str; 6] = [
-        "probe_radius",
-        "tcp_offset",
-        "joint_offsets",
-        "joint_compliance",
-        "part_scale",
-        "trigger_latency",
-    ];
-}
+const EFFECT_NAMES: [&str; 6] = [
+    "probe_radius",
+    "tcp_offset",
+    "joint_offsets",
+    "joint_compliance",
+    "part_scale",
+    "trigger_latency",
+];
 
 /// Every effect is tried on sessions with these noise seeds.
 const SEEDS: std::ops::Range<u64> = 0..4;
@@ -506,7 +502,7 @@ fn assert_confounded(
             .next()
             .is_some_and(|tied| tied.split(", ").any(|t| t == name))
     };
-    let others_tied = Effect::ALL_NAMES
+    let others_tied = EFFECT_NAMES
         .iter()
         .any(|name| *name != hidden && rival.is_none_or(|r| r == *name) && tied_with(name));
     let ambiguous = diagnosis.verdict == Verdict::Ambiguous && tied_with(hidden) && others_tied;
