@@ -121,41 +121,40 @@ fn aligned(cell: &Cell, samples: &[TouchSample]) -> Isometry3<f64> {
         .base_from_part
 }
 
-fn pose_error(pose: &Isometry3<f64>, truth: &Isometry3<f64>) -> f64 {
-    (pose.translation.vector - truth.translation.vector).norm()
-}
-
+/// Twelve touches tilted by at most 0.4 rad cannot tell a larger ball from a TCP shift along the
+/// probe or from an elbow sagging under the tool (`joint_compliance`): each explains them within
+/// the ambiguity margin. The diagnosis must say so rather than pick one, estimate the ball
+/// correctly among the tied candidates, and leave the pose as the pose-only fit has it.
+/// `tests/diagnosis_effects.rs` has the session design that does separate them.
 #[test]
-fn a_larger_ball_than_declared_is_found_and_its_size_estimated() {
+fn a_larger_ball_on_twelve_mildly_tilted_touches_is_tied_not_misnamed() {
     let cell = cell();
     let mut rng = TrialRng::new(3);
     // 0.3 mm more radius than declared: six times the noise.
     let samples = touches(&cell, 0.0033, 1.0, &mut rng);
     let start = aligned(&cell, &samples);
     let diagnosis = diagnose(&cell.chain, &cell.tool, &cell.mesh, &samples, &start, SIGMA).unwrap();
-    assert_eq!(
-        diagnosis.verdict,
-        Verdict::Effect,
-        "{}: {:?}",
-        diagnosis.explanation,
-        diagnosis.alternatives
-    );
-    let (name, fit) = diagnosis.effect.clone().unwrap();
-    assert_eq!(name, "probe_radius");
-    let (_, estimate, stderr) = fit.params[0].clone();
+    let report = format!("{}: {:?}", diagnosis.explanation, diagnosis.alternatives);
+    assert_eq!(diagnosis.verdict, Verdict::Ambiguous, "{report}");
+    let tied = diagnosis.explanation.split(" explain").next().unwrap();
+    assert!(tied.contains("probe_radius"), "{report}");
+    assert!(tied.contains("tcp_offset"), "{report}");
+    let radius = std::iter::once(diagnosis.effect.clone().unwrap())
+        .chain(
+            diagnosis
+                .alternatives
+                .iter()
+                .filter_map(|a| a.fit.clone().map(|fit| (a.name, fit))),
+        )
+        .find(|(name, _)| *name == "probe_radius")
+        .unwrap()
+        .1;
+    let (_, estimate, stderr) = radius.params[0].clone();
     assert!(
         (estimate - 0.0003).abs() < 3.0 * stderr,
         "{estimate} +- {stderr}"
     );
-    assert!(
-        diagnosis.after.loo_rms_m <= 1.5 * SIGMA,
-        "{}",
-        diagnosis.after.loo_rms_m
-    );
-    assert!(
-        pose_error(&diagnosis.after.base_from_part, &cell.truth)
-            < pose_error(&diagnosis.before.base_from_part, &cell.truth)
-    );
+    assert_eq!(diagnosis.after, diagnosis.before);
 }
 
 #[test]

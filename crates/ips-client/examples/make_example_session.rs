@@ -86,19 +86,34 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         serde_json::to_string_pretty(&serde_json::json!({"base_from_part": pose(&truth)}))? + "\n",
     )?;
     // The same cell touched with a 3.4 mm ball while the session still declares 3 mm: an
-    // undeclared effect for `ips diagnose` to find.
-    let bigger_ball = align_core::trials::probing::joint_targets(
+    // undeclared effect for `ips diagnose` to find. Each point is touched head-on and tilted
+    // either way by 0.6 rad: on head-on touches alone a larger ball and a longer TCP look the
+    // same, and the diagnosis would rightly call it ambiguous.
+    let three_ways: Vec<_> = align_core::trials::probing::step_block_table_touches()
+        .into_iter()
+        .flat_map(|(p, n)| [(p, n, 0.0), (p, n, 0.6), (p, n, -0.6)])
+        .collect();
+    let bigger_ball = align_core::trials::probing::tilted_joint_targets(
         &chain,
         &truth,
         &tcp,
         0.0034,
-        &align_core::trials::probing::step_block_table_touches(),
+        1.0,
+        &three_ways,
         &[0.0, -1.57, 1.57, -1.57, -1.57, 0.0],
     )?;
     let mut wrong_radius = session.clone();
-    for (inspection, q) in wrong_radius.inspections.iter_mut().zip(bigger_ball) {
-        inspection.q = q;
-    }
+    wrong_radius.inspections = bigger_ball
+        .into_iter()
+        .enumerate()
+        .map(|(index, q)| ips_client::session::Inspection {
+            id: (index + 1).to_string(),
+            q,
+            qd: None,
+            stamp: None,
+            face: None,
+        })
+        .collect();
     std::fs::write(
         folder.join("session_probe_radius.json"),
         serde_json::to_string_pretty(&wrong_radius)? + "\n",

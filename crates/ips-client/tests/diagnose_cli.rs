@@ -75,7 +75,7 @@ fn undeclared_ball_radius_is_found_with_the_design_keys() {
     ] {
         assert!(result.get(key).is_some(), "missing {key}");
     }
-    assert_eq!(result["inspections"].as_array().unwrap().len(), 9);
+    assert_eq!(result["inspections"].as_array().unwrap().len(), 27);
     let plot = std::fs::read_to_string(result["plot"].as_str().unwrap()).unwrap();
     assert!(plot.starts_with("<svg") && plot.contains("modelling probe_radius"));
     let _ = std::fs::remove_dir_all(path.parent().unwrap());

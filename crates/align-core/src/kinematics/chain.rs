@@ -6,7 +6,7 @@
 //! a joint crossed upwards contributes the inverse of its transform, which is a motion about the
 //! negated axis followed by the inverse of its origin.
 
-use nalgebra::{Isometry3, Matrix6xX, Translation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix6xX, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use super::error::{KinematicsError, ModelError};
 use super::model::{JointKind, JointLimits, RobotModel};
@@ -22,12 +22,17 @@ pub struct ChainJoint {
 }
 
 #[derive(Debug, Clone, PartialEq)]
-struct Segment {
+pub(super) struct Segment {
     /// Joint axis in the frame just before the motion, negated for joints crossed upwards.
-    axis: Unit<Vector3<f64>>,
-    prismatic: bool,
+    pub(super) axis: Unit<Vector3<f64>>,
+    pub(super) prismatic: bool,
     /// Fixed transform from the frame after this motion to the frame before the next one.
-    after: Isometry3<f64>,
+    pub(super) after: Isometry3<f64>,
+    /// Mass carried rigidly by this segment (its links and everything hanging off them but not
+    /// on the chain), kg.
+    pub(super) mass_kg: f64,
+    /// That mass times its centre of mass in the frame after this motion, kg m.
+    pub(super) first_moment_kg_m: Vector3<f64>,
 }
 
 /// Forward kinematics, Jacobian and limits of the chain `base_link -> tip_link`.
@@ -35,14 +40,16 @@ struct Segment {
 pub struct Chain {
     base_link: String,
     tip_link: String,
-    base_from_first: Isometry3<f64>,
-    segments: Vec<Segment>,
+    pub(super) base_from_first: Isometry3<f64>,
+    pub(super) segments: Vec<Segment>,
     joints: Vec<ChainJoint>,
 }
 
 enum Step {
     Fixed(Isometry3<f64>),
     Motion(Unit<Vector3<f64>>, bool),
+    /// A point mass (kg, centre in the current frame) moving with the current link.
+    Mass(f64, Point3<f64>),
 }
 
 impl Chain {
@@ -70,6 +77,7 @@ impl Chain {
                 tip: tip.to_owned(),
             });
         }
+        let on_path: Vec<usize> = up.iter().chain(&down).copied().collect();
         let mut steps = Vec::new();
         let mut joints = Vec::new();
         let crossed = up
@@ -104,11 +112,13 @@ impl Chain {
                     steps.push(Step::Motion(-joint.axis, prismatic));
                 }
                 steps.push(Step::Fixed(joint.parent_from_joint.inverse()));
+                steps.extend(attached_masses(model, joint.parent, &on_path));
             } else {
                 steps.push(Step::Fixed(joint.parent_from_joint));
                 if moving {
                     steps.push(Step::Motion(joint.axis, prismatic));
                 }
+                steps.extend(attached_masses(model, joint.child, &on_path));
             }
             if moving {
                 joints.push(ChainJoint {
@@ -240,7 +250,7 @@ impl Chain {
     }
 }
 
-fn motion(segment: &Segment, value: f64) -> Isometry3<f64> {
+pub(super) fn motion(segment: &Segment, value: f64) -> Isometry3<f64> {
     if segment.prismatic {
         Isometry3::from_parts(
             Translation3::from(segment.axis.into_inner() * value),
@@ -252,6 +262,44 @@ fn motion(segment: &Segment, value: f64) -> Isometry3<f64> {
             UnitQuaternion::from_axis_angle(&segment.axis, value),
         )
     }
+}
+
+/// Point masses of `link` and of every link joined to it other than through the chain's own
+/// joints, as `Step::Mass` in `link`'s frame. Joints off the chain are taken at zero: their
+/// values are not part of the chain's joint vector.
+fn attached_masses(model: &RobotModel, link: usize, on_path: &[usize]) -> Vec<Step> {
+    let mut masses = Vec::new();
+    let mut pending = vec![(link, Isometry3::identity())];
+    let mut visited = vec![link];
+    while let Some((current, frame_from_current)) = pending.pop() {
+        if let Some(inertial) = &model.links()[current].inertial {
+            let com = frame_from_current * Point3::from(inertial.link_from_com.translation.vector);
+            masses.push(Step::Mass(inertial.mass_kg, com));
+        }
+        for (index, joint) in model.joints().iter().enumerate() {
+            if on_path.contains(&index) {
+                continue;
+            }
+            let neighbour = if joint.parent == current {
+                Some((joint.child, frame_from_current * joint.parent_from_joint))
+            } else if joint.child == current {
+                Some((
+                    joint.parent,
+                    frame_from_current * joint.parent_from_joint.inverse(),
+                ))
+            } else {
+                None
+            };
+            match neighbour {
+                Some((next, frame_from_next)) if !visited.contains(&next) => {
+                    visited.push(next);
+                    pending.push((next, frame_from_next));
+                }
+                _ => {}
+            }
+        }
+    }
+    masses
 }
 
 fn compile(steps: Vec<Step>) -> (Isometry3<f64>, Vec<Segment>) {
@@ -267,7 +315,17 @@ fn compile(steps: Vec<Step>) -> (Isometry3<f64>, Vec<Segment>) {
                 axis,
                 prismatic,
                 after: Isometry3::identity(),
+                mass_kg: 0.0,
+                first_moment_kg_m: Vector3::zeros(),
             }),
+            // `after` so far is the transform from the frame after the motion to the current
+            // link; masses before the first motion never move and load no joint.
+            Step::Mass(mass_kg, com) => {
+                if let Some(segment) = segments.last_mut() {
+                    segment.mass_kg += mass_kg;
+                    segment.first_moment_kg_m += mass_kg * (segment.after * com).coords;
+                }
+            }
         }
     }
     (prefix, segments)

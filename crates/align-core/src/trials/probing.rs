@@ -81,15 +81,49 @@ pub fn tilted_joint_targets(
     touches: &[(Point3<f64>, Vector3<f64>, f64)],
     seed: &[f64],
 ) -> Result<Vec<Vec<f64>>, IkError> {
+    let oriented: Vec<_> = touches
+        .iter()
+        .map(|(point, normal, tilt)| {
+            let normal_base = base_from_part.rotation * normal;
+            let tilt_axis = normal_base.cross(&Vector3::new(0.3, 1.0, 0.2)).normalize();
+            let probe_axis = UnitQuaternion::from_scaled_axis(tilt_axis * *tilt) * -normal_base;
+            (
+                *point,
+                *normal,
+                base_from_part.rotation.inverse() * probe_axis,
+            )
+        })
+        .collect();
+    oriented_joint_targets(
+        chain,
+        base_from_part,
+        flange_from_tcp,
+        tip_radius_m,
+        part_scale,
+        &oriented,
+        seed,
+    )
+}
+
+/// As [`tilted_joint_targets`], with each probe's axis (pointing from the flange to the ball,
+/// part frame) given: a ball touches a face wherever its stylus points, as a CMM touches side
+/// faces with a vertical stylus.
+pub fn oriented_joint_targets(
+    chain: &Chain,
+    base_from_part: &Isometry3<f64>,
+    flange_from_tcp: &Isometry3<f64>,
+    tip_radius_m: f64,
+    part_scale: f64,
+    touches: &[(Point3<f64>, Vector3<f64>, Vector3<f64>)],
+    seed: &[f64],
+) -> Result<Vec<Vec<f64>>, IkError> {
     let start = seed;
     let mut seed = seed.to_vec();
     let mut targets = Vec::with_capacity(touches.len());
-    for (point, normal, tilt) in touches {
+    for (point, normal, probe_axis_in_part) in touches {
         let surface = Point3::from(point.coords * part_scale);
         let centre = base_from_part * (surface + normal * tip_radius_m);
-        let normal_base = base_from_part.rotation * normal;
-        let tilt_axis = normal_base.cross(&Vector3::new(0.3, 1.0, 0.2)).normalize();
-        let probe_axis = UnitQuaternion::from_scaled_axis(tilt_axis * *tilt) * -normal_base;
+        let probe_axis = (base_from_part.rotation * probe_axis_in_part).normalize();
         // Probe z along the approach; x roughly along base x so the wrist stays tidy.
         let helper = if probe_axis.x.abs() > 0.9 {
             Vector3::y()
