@@ -333,8 +333,17 @@ impl Service {
                 request.len()
             ));
         }
-        let request: ServiceRequest =
-            serde_json::from_slice(request).map_err(|e| format!("not a service request: {e}"))?;
+        let request: ServiceRequest = serde_json::from_slice(request).map_err(|e| {
+            // Python's json module writes NaN and Infinity by default; serde only says "expected
+            // value", which does not point at the number.
+            let text = String::from_utf8_lossy(request);
+            let hint = if text.contains("NaN") || text.contains("Infinity") {
+                " (NaN and Infinity are not JSON numbers: send finite values)"
+            } else {
+                ""
+            };
+            format!("not a service request: {e}{hint}")
+        })?;
         match request.body.command.as_str() {
             "status" => Ok(self.status()),
             "start" => {
@@ -374,6 +383,24 @@ impl Service {
                 Ok(json!({"inspections": 0}))
             }
             "align" => self.align(),
+            "align-cloud" => {
+                let job = crate::align_cloud::from_request(
+                    &request.body,
+                    &self.state.template.part,
+                    &self.state.folder,
+                )
+                .map_err(|e| e.0)?;
+                let output = crate::align_cloud::align(&job).map_err(|e| e.0)?;
+                serde_json::to_value(output).map_err(|e| e.to_string())
+            }
+            "diagnose" => {
+                // Exactly what `save` would write: the template's robot, tool and part with the
+                // inspections in memory.
+                let session = LoadedSession::resolve(self.session_file(), &self.state.folder)
+                    .map_err(|e| e.0)?;
+                let diagnosed = crate::diagnose::diagnose_session(&session).map_err(|e| e.0)?;
+                serde_json::to_value(diagnosed.output(None)).map_err(|e| e.to_string())
+            }
             "save" => {
                 let path = request.body.path.ok_or("save needs a 'path'")?;
                 let mut file = self.session_file();
@@ -423,7 +450,7 @@ impl Service {
                 Ok(json!({"inspections": self.state.inspections.len()}))
             }
             other => Err(format!(
-                "unknown command '{other}' (expected status, start, stop, get, list, remove, reset, align, save or load)"
+                "unknown command '{other}' (expected status, start, stop, get, list, remove, reset, align, align-cloud, diagnose, save or load)"
             )),
         }
     }
