@@ -131,7 +131,7 @@ fn print_table(rows: &[Row]) {
         sorted.sort_by(f64::total_cmp);
         let median = sorted[sorted.len() / 2];
         println!(
-            "| {} | {} | {:.1} | {:.1} | {:.1} | {} |",
+            "| {} | {} | {:.2} | {:.2} | {:.2} | {} |",
             row.what,
             sorted.len(),
             median * 1e3,
@@ -246,8 +246,8 @@ fn main() {
         &json!({"command": "load", "path": sessions[0].1.display().to_string()}),
     );
     for (what, slow) in [
-        ("diagnose (ball radius)", &diagnose),
-        ("align-cloud", &align_cloud),
+        ("a diagnose (ball radius)", &diagnose),
+        ("an align-cloud", &align_cloud),
     ] {
         let (status_s, slow_s): (Vec<f64>, Vec<f64>) = (0..runs)
             .map(|_| status_behind(&client, &second_client, slow))
@@ -255,10 +255,10 @@ fn main() {
         let mut sorted = slow_s;
         sorted.sort_by(f64::total_cmp);
         rows.push(Row {
-            what: format!("status sent just after a {what}"),
+            what: format!("status, sent 10 ms after {what}"),
             seconds: status_s,
             note: format!(
-                "the {what} itself: median {:.1} ms",
+                "{what} itself: median {:.1} ms",
                 sorted[sorted.len() / 2] * 1e3
             ),
         });
