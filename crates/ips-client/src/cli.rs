@@ -37,7 +37,7 @@ pub enum Command {
     /// by the running service with --service).
     #[command(
         name = "align-cloud",
-        after_help = "Examples:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json\n  ips align-cloud --service tcp://127.0.0.1:4000 --cloud /data/scan.ply \\\n      (the service's session part from its nominal pose, delta 0.1 m; paths as the service sees them)"
+        after_help = "Examples:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json\n  ips align-cloud --service tcp://127.0.0.1:4000 --cloud /data/scan.xyz --cloud-scale 0.001\n      (asks the running service: its session part from the nominal pose, delta 0.1 m;\n      paths as the service sees them)"
     )]
     AlignCloud(crate::align_cloud::AlignCloudArgs),
     /// The alignment service: mirrors the robot through robot-bridge, captures inspections,
