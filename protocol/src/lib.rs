@@ -338,7 +338,7 @@ impl HwStateBody {
 /// thesis's envelope with `"type": "request"`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ServiceRequestBody {
-    /// status, start, stop, get, list, remove, reset, align, save, load.
+    /// status, start, stop, get, list, remove, reset, align, align-cloud, diagnose, save, load.
     pub command: String,
     /// Inspection ids (remove).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -346,6 +346,44 @@ pub struct ServiceRequestBody {
     /// A session file (save, load).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub path: Option<String>,
+    /// Scanner cloud file, as the service sees the path (align-cloud).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cloud: Option<String>,
+    /// Unit of the cloud file in metres, 0.001 for mm (align-cloud; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cloud_scale: Option<f64>,
+    /// A part mesh to align instead of the session's part (align-cloud).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<String>,
+    /// Unit of `mesh` in metres (align-cloud, only with `mesh`; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh_scale: Option<f64>,
+    /// The part pose `base_from_part` the alignment starts from (align-cloud; default the
+    /// session part's nominal pose).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_pose: Option<PoseXyzRpy>,
+    /// Upper bound of the start pose's error, m: the thesis's delta (align-cloud; default 0.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delta_m: Option<f64>,
+    /// The thesis's SVD step instead of point-to-plane (align-cloud; default false).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub point_to_point: Option<bool>,
+    /// Delta shrinks as cos^2 (the thesis's code) instead of cos (its eq. 33) (align-cloud;
+    /// default false).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cos_squared: Option<bool>,
+    /// No exploration of orientations around the start pose, the thesis's behaviour
+    /// (align-cloud; default false).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub local: Option<bool>,
+}
+
+/// A pose as the session file writes it: position x, y, z (m) and fixed-axis roll, pitch, yaw
+/// (rad).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseXyzRpy {
+    pub xyz: [f64; 3],
+    pub rpy: [f64; 3],
 }
 
 /// The service's reply, `"type": "reply"`: `ok`, a `reason` when not, and the command's data.
@@ -375,6 +413,15 @@ pub fn service_request(command: &str) -> ServiceRequest {
             command: command.to_owned(),
             ids: Vec::new(),
             path: None,
+            cloud: None,
+            cloud_scale: None,
+            mesh: None,
+            mesh_scale: None,
+            start_pose: None,
+            delta_m: None,
+            point_to_point: None,
+            cos_squared: None,
+            local: None,
         },
     }
 }
@@ -397,7 +444,29 @@ impl Message for ServiceReply {
 }
 
 impl Message for ServiceRequest {
+    /// Refuses non-finite numbers, which serde_json would write as `null`: the service would
+    /// then answer about a type error the sender never made.
     fn validate(&self) -> Result<(), ProtocolError> {
+        let body = &self.body;
+        let scalars = [
+            ("cloud_scale", body.cloud_scale),
+            ("mesh_scale", body.mesh_scale),
+            ("delta_m", body.delta_m),
+        ];
+        for (name, value) in scalars {
+            if value.is_some_and(|v| !v.is_finite()) {
+                return Err(ProtocolError::NonFinite(format!(".body.{name}")));
+            }
+        }
+        if let Some(pose) = &body.start_pose {
+            for (name, values) in [("xyz", pose.xyz), ("rpy", pose.rpy)] {
+                if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+                    return Err(ProtocolError::NonFinite(format!(
+                        ".body.start_pose.{name}[{index}]"
+                    )));
+                }
+            }
+        }
         Ok(())
     }
 }

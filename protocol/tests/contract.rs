@@ -174,3 +174,28 @@ fn senders_never_emit_nan() {
         ProtocolError::Shape(_)
     ));
 }
+
+#[test]
+fn service_requests_never_carry_nan_and_align_cloud_needs_a_cloud() {
+    let mut request = protocol::service_request("align-cloud");
+    request.body.cloud = Some("scan.ply".to_owned());
+    request.body.delta_m = Some(f64::NAN);
+    assert_eq!(
+        to_json(&request).unwrap_err(),
+        ProtocolError::NonFinite(".body.delta_m".to_owned())
+    );
+    request.body.delta_m = Some(0.1);
+    request.body.start_pose = Some(protocol::PoseXyzRpy {
+        xyz: [0.6, f64::INFINITY, 0.0],
+        rpy: [0.0; 3],
+    });
+    assert_eq!(
+        to_json(&request).unwrap_err(),
+        ProtocolError::NonFinite(".body.start_pose.xyz[1]".to_owned())
+    );
+    let service_schema = schema("service.schema.json");
+    let without_cloud = serde_json::json!({"header": {"from": "ips", "to": "align", "type": "request"}, "body": {"command": "align-cloud", "delta_m": 0.1}});
+    assert!(!service_schema.is_valid(&without_cloud));
+    let negative_delta = serde_json::json!({"header": {"from": "ips", "to": "align", "type": "request"}, "body": {"command": "align-cloud", "cloud": "scan.ply", "delta_m": -0.1}});
+    assert!(!service_schema.is_valid(&negative_delta));
+}

@@ -5,13 +5,13 @@ use align_core::registration::psa::{
     PsaMethod, PsaOptions, PsaResult, PsaTarget, Search, align_touches,
 };
 use nalgebra::Isometry3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::BadInput;
 use crate::cli::AlignArgs;
 use crate::session::LoadedSession;
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct PoseJson {
     pub xyz: [f64; 3],
     pub rpy: [f64; 3],
@@ -30,7 +30,7 @@ impl From<&Isometry3<f64>> for PoseJson {
     }
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct ResidualJson {
     pub id: String,
     /// Signed distance of the touch from the aligned surface (ball radius removed), m.

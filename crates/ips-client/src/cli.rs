@@ -33,10 +33,11 @@ pub enum Command {
     /// Point Set Alignment: move the session's part until it matches its inspections.
     #[command(after_help = "Example:\n  ips align examples/step_block_ur10/session.json --json")]
     Align(AlignArgs),
-    /// Point Cloud Alignment: move a part's mesh until it matches a scanner cloud.
+    /// Point Cloud Alignment: move a part's mesh until it matches a scanner cloud (here, or
+    /// by the running service with --service).
     #[command(
         name = "align-cloud",
-        after_help = "Example:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json"
+        after_help = "Examples:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json\n  ips align-cloud --service tcp://127.0.0.1:4000 --cloud /data/scan.xyz --cloud-scale 0.001\n      (asks the running service: its session part from the nominal pose, delta 0.1 m;\n      paths as the service sees them)"
     )]
     AlignCloud(crate::align_cloud::AlignCloudArgs),
     /// The alignment service: mirrors the robot through robot-bridge, captures inspections,
@@ -64,7 +65,8 @@ pub enum Command {
     /// processes, nine touches at a hidden part pose, alignment, error against the truth.
     Demo(crate::demo::DemoArgs),
     /// Align, then trace the residual to an effect the model lacks (probe radius, TCP offset,
-    /// joint offsets, part scale, trigger latency) and report the error before and after.
+    /// joint offsets, part scale, trigger latency) and report the error before and after: of a
+    /// SESSION file, or of the running service's inspections with --service.
     Diagnose(crate::diagnose::DiagnoseArgs),
 }
 

@@ -1,9 +1,14 @@
 //! `ips start|stop|get|list|remove|reset|save|load|status`: one request to a running `ips serve`.
+//! `ips align-cloud --service` and `ips diagnose --service` send theirs through [`request_data`].
 
 use serde_json::Value;
 
 use crate::BadInput;
 use crate::cli::ServiceArgs;
+
+/// How long a client waits for a reply. The service answers in turn, so this covers a queue of
+/// slow requests (an align-cloud takes a fraction of a second, see serve.rs).
+const REPLY_TIMEOUT_MS: i32 = 30_000;
 
 /// Sends one request and returns the reply for printing (text or `--json`); a refused request
 /// is bad input (exit 2) with the service's reason.
@@ -18,40 +23,47 @@ pub fn call_with_path(
     path: Option<String>,
     args: &ServiceArgs,
 ) -> Result<String, BadInput> {
-    let context = zmq::Context::new();
-    let socket = context.socket(zmq::REQ).map_err(BadInput::new)?;
-    socket.set_linger(0).map_err(BadInput::new)?;
-    socket.set_rcvtimeo(30_000).map_err(BadInput::new)?;
-    socket.set_sndtimeo(5_000).map_err(BadInput::new)?;
-    socket
-        .connect(&args.service)
-        .map_err(|error| BadInput(format!("{}: {error}", args.service)))?;
     let mut request = protocol::service_request(command);
     request.body.ids = ids;
     request.body.path = path;
-    let text = protocol::to_json(&request).map_err(BadInput::new)?;
+    let data = request_data(&args.service, &request)?;
+    Ok(if args.json {
+        format!("{}\n", serde_json::to_string(&data).unwrap_or_default())
+    } else {
+        text_of(command, &data)
+    })
+}
+
+/// Sends one request to the service at `endpoint` and returns the reply's data; a refused
+/// request is bad input (exit 2) with the service's reason.
+pub fn request_data(endpoint: &str, request: &protocol::ServiceRequest) -> Result<Value, BadInput> {
+    let context = zmq::Context::new();
+    let socket = context.socket(zmq::REQ).map_err(BadInput::new)?;
+    socket.set_linger(0).map_err(BadInput::new)?;
+    socket
+        .set_rcvtimeo(REPLY_TIMEOUT_MS)
+        .map_err(BadInput::new)?;
+    socket.set_sndtimeo(5_000).map_err(BadInput::new)?;
+    socket
+        .connect(endpoint)
+        .map_err(|error| BadInput(format!("{endpoint}: {error}")))?;
+    let text = protocol::to_json(request).map_err(BadInput::new)?;
     socket.send(text.as_bytes(), 0).map_err(BadInput::new)?;
     let reply = socket.recv_bytes(0).map_err(|_| {
         BadInput(format!(
-            "no reply from the service at {} within 30 s",
-            args.service
+            "no reply from the service at {endpoint} within {} s",
+            REPLY_TIMEOUT_MS / 1000
         ))
     })?;
     let reply: protocol::ServiceReply = serde_json::from_slice(&reply)
         .map_err(|error| BadInput(format!("bad reply from the service: {error}")))?;
-    if !reply.body.ok {
-        return Err(BadInput(
-            reply.body.reason.unwrap_or_else(|| "refused".to_owned()),
-        ));
-    }
-    Ok(if args.json {
-        format!(
-            "{}\n",
-            serde_json::to_string(&reply.body.data).unwrap_or_default()
-        )
+    if reply.body.ok {
+        Ok(reply.body.data)
     } else {
-        text_of(command, &reply.body.data)
-    })
+        Err(BadInput(
+            reply.body.reason.unwrap_or_else(|| "refused".to_owned()),
+        ))
+    }
 }
 
 fn text_of(command: &str, data: &Value) -> String {

@@ -452,10 +452,7 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     for child in [service, bridge, sim] {
         child.terminate();
     }
-    let diagnosis = crate::diagnose::run(&crate::diagnose::DiagnoseArgs {
-        session: saved,
-        json: true,
-    })?;
+    let diagnosis = crate::diagnose::run_file(&saved)?;
     let _ = std::fs::remove_dir_all(&folder);
     if aligned["body"]["ok"] != true {
         return Err(BadInput(format!(

@@ -1,29 +1,42 @@
-//! `ips diagnose SESSION`: align, then trace what is left to an effect the model lacks
-//! (DESIGN.md 6.4 keys), and draw the residuals per touch before and after as an SVG next to
-//! the session.
+//! `ips diagnose`: align, then trace what is left to an effect the model lacks (DESIGN.md 6.4
+//! keys). [`diagnose_session`] works on a session in memory and is what both the offline command
+//! (a SESSION file, with an SVG of the residuals per touch written next to it) and the alignment
+//! service's `diagnose` request (its current inspections) run.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use align_core::diagnosis::{Diagnosis, Fit, TouchSample, diagnose};
 use align_core::pose::xyz_rpy;
 use align_core::registration::psa::{PsaOptions, PsaTarget, align_touches};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use crate::BadInput;
 use crate::session::LoadedSession;
 
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Examples:\n  ips diagnose examples/step_block_ur10/session_probe_radius.json\n  ips diagnose --service tcp://127.0.0.1:4000 --json    (the running service's inspections)"
+)]
 pub struct DiagnoseArgs {
-    /// Session file; its `noise_sigma` is the declared touch noise (m).
-    #[arg(value_name = "SESSION")]
-    pub session: PathBuf,
+    /// Session file; its `noise_sigma` is the declared touch noise (m). Leave it out and give
+    /// --service to diagnose the running service's inspections instead.
+    #[arg(
+        value_name = "SESSION",
+        required_unless_present = "service",
+        conflicts_with = "service"
+    )]
+    pub session: Option<PathBuf>,
+    /// Ask the running alignment service at this REP endpoint (e.g. tcp://127.0.0.1:4000) to
+    /// diagnose its current inspections (what `ips save` would write). No plot is drawn.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub service: Option<String>,
     /// Print one JSON document instead of text.
     #[arg(long)]
     pub json: bool,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct DiagnoseOutput {
     pub verdict: String,
     pub effect: Value,
@@ -35,8 +48,18 @@ pub struct DiagnoseOutput {
     pub inspections: Vec<Value>,
     pub explanation: String,
     pub chi_square: [f64; 2],
-    /// The picture of the residuals, written next to the session.
-    pub plot: String,
+    /// The picture of the residuals, written next to the session file (none from the service:
+    /// its session is in memory).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plot: Option<String>,
+}
+
+/// A finished diagnosis with what drawing and reporting it need.
+#[derive(Debug)]
+pub struct SessionDiagnosis {
+    pub diagnosis: Diagnosis,
+    pub samples: Vec<TouchSample>,
+    pub noise_sigma_m: f64,
 }
 
 fn summary(fit: &Fit) -> Value {
@@ -62,8 +85,38 @@ fn effect_json(name: &str, fit: &Fit) -> Value {
     json!({"name": name, "params": params, "stderr": stderr, "bic": fit.bic})
 }
 
+/// The command: the SESSION file diagnosed here, or the service `--service` names asked.
 pub fn run(args: &DiagnoseArgs) -> Result<DiagnoseOutput, BadInput> {
-    let session = LoadedSession::load(&args.session)?;
+    match (&args.service, &args.session) {
+        (Some(endpoint), _) => {
+            let request = protocol::service_request("diagnose");
+            let data = crate::client::request_data(endpoint, &request)?;
+            serde_json::from_value(data).map_err(|error| {
+                BadInput(format!(
+                    "the service's diagnose reply is not the document: {error}"
+                ))
+            })
+        }
+        (None, Some(session)) => run_file(session),
+        (None, None) => Err(BadInput(
+            "diagnose needs a SESSION file or --service ENDPOINT".to_owned(),
+        )),
+    }
+}
+
+/// The offline command on a session file: diagnoses it and draws the residuals next to it.
+pub fn run_file(path: &Path) -> Result<DiagnoseOutput, BadInput> {
+    let session = LoadedSession::load(path)?;
+    let diagnosed = diagnose_session(&session)?;
+    let plot = path.with_extension("diagnosis.svg");
+    std::fs::write(&plot, diagnosed.svg())
+        .map_err(|error| BadInput(format!("cannot write '{}': {error}", plot.display())))?;
+    Ok(diagnosed.output(Some(plot.display().to_string())))
+}
+
+/// Aligns the session's part to its inspections, then diagnoses the residual against the
+/// session's declared `noise_sigma`.
+pub fn diagnose_session(session: &LoadedSession) -> Result<SessionDiagnosis, BadInput> {
     let sigma = session.file.noise_sigma.ok_or_else(|| {
         BadInput(
             "the session declares no noise_sigma (m), which diagnosis tests against".to_owned(),
@@ -102,30 +155,44 @@ pub fn run(args: &DiagnoseArgs) -> Result<DiagnoseOutput, BadInput> {
         sigma,
     )
     .map_err(BadInput)?;
-    let plot = args.session.with_extension("diagnosis.svg");
-    std::fs::write(&plot, svg(&diagnosis, &samples, sigma))
-        .map_err(|error| BadInput(format!("cannot write '{}': {error}", plot.display())))?;
-    Ok(DiagnoseOutput {
-        verdict: diagnosis.verdict.name().to_owned(),
-        effect: diagnosis.effect.as_ref().map_or(Value::Null, |(name, fit)| effect_json(name, fit)),
-        alternatives: diagnosis
-            .alternatives
-            .iter()
-            .map(|a| json!({"name": a.name, "reason": a.reason, "bic": a.fit.as_ref().map(|f| f.bic), "loo_rms": a.fit.as_ref().map(|f| f.loo_rms_m)}))
-            .collect(),
-        before: summary(&diagnosis.before),
-        after: summary(&diagnosis.after),
-        pose_before: pose(&diagnosis.before),
-        pose_after: pose(&diagnosis.after),
-        inspections: samples
-            .iter()
-            .enumerate()
-            .map(|(i, s)| json!({"id": s.id, "residual_before": diagnosis.before.residuals_m[i], "residual_after": diagnosis.after.residuals_m[i]}))
-            .collect(),
-        explanation: diagnosis.explanation.clone(),
-        chi_square: [diagnosis.chi_square.0, diagnosis.chi_square.1],
-        plot: plot.display().to_string(),
+    Ok(SessionDiagnosis {
+        diagnosis,
+        samples,
+        noise_sigma_m: sigma,
     })
+}
+
+impl SessionDiagnosis {
+    /// The DESIGN.md 6.4 document; `plot` names the SVG when one was written.
+    pub fn output(&self, plot: Option<String>) -> DiagnoseOutput {
+        let diagnosis = &self.diagnosis;
+        DiagnoseOutput {
+            verdict: diagnosis.verdict.name().to_owned(),
+            effect: diagnosis.effect.as_ref().map_or(Value::Null, |(name, fit)| effect_json(name, fit)),
+            alternatives: diagnosis
+                .alternatives
+                .iter()
+                .map(|a| json!({"name": a.name, "reason": a.reason, "bic": a.fit.as_ref().map(|f| f.bic), "loo_rms": a.fit.as_ref().map(|f| f.loo_rms_m)}))
+                .collect(),
+            before: summary(&diagnosis.before),
+            after: summary(&diagnosis.after),
+            pose_before: pose(&diagnosis.before),
+            pose_after: pose(&diagnosis.after),
+            inspections: self
+                .samples
+                .iter()
+                .enumerate()
+                .map(|(i, s)| json!({"id": s.id, "residual_before": diagnosis.before.residuals_m[i], "residual_after": diagnosis.after.residuals_m[i]}))
+                .collect(),
+            explanation: diagnosis.explanation.clone(),
+            chi_square: [diagnosis.chi_square.0, diagnosis.chi_square.1],
+            plot,
+        }
+    }
+
+    pub fn svg(&self) -> String {
+        svg(&self.diagnosis, &self.samples, self.noise_sigma_m)
+    }
 }
 
 /// Residual per touch, before (grey) and after (blue), with the +-2 sigma band.
@@ -229,7 +296,9 @@ impl DiagnoseOutput {
                 alternative["reason"].as_str().unwrap_or("")
             );
         }
-        text += &format!("plot: {}\n", self.plot);
+        if let Some(plot) = &self.plot {
+            text += &format!("plot: {plot}\n");
+        }
         text
     }
 }

@@ -10,10 +10,22 @@
 //! session file's inspections in one entry), so an acknowledged inspection
 //! survives a crash; a restarted service replays the journal.
 //!
-//! Requests are served in turn by one thread that owns the REP socket; an `align` runs in that
-//! thread, so a status request waits at most for one alignment (tens of milliseconds for touch
-//! sets, see docs/BENCHMARKS.md). The hardware-state subscription runs in its own thread and is
-//! never blocked by requests.
+//! `align-cloud` aligns the session's part (or a requested mesh) to a scanner cloud file named
+//! in the request, from the part's nominal pose with delta 0.1 m unless the request gives them;
+//! `diagnose` diagnoses the inspections in memory with the session's robot, tool and part,
+//! exactly what `save` would write. Their data are the documents of `ips align-cloud --json` and
+//! `ips diagnose --json` (without `plot`), made by the same functions.
+//!
+//! Requests are served in turn by one thread that owns the REP socket, and `align`,
+//! `align-cloud` and `diagnose` run in that thread: a `status` (or any request) arriving
+//! meanwhile is answered only when the running one has finished. Measured on a shared 2-core
+//! machine (`cargo bench -p ips-client --bench service_requests`, docs/BENCHMARKS.md): a
+//! `diagnose` of 16 inspections takes 0.3-0.35 s when the residual needs every candidate effect
+//! fitted and about 0.09 s when nothing is left to explain; an `align-cloud` of the example scan
+//! (23,555 points) 0.08-0.14 s; a touch-set `align` tens of milliseconds. Those are the waits a
+//! status request sees; the `ips` client waits up to 30 s. The hardware-state
+//! subscription runs in its own thread and is never blocked by requests, so the live sample a
+//! `get` takes after a slow request is as fresh as ever.
 
 use std::fs::{File, OpenOptions};
 use std::io::{BufRead, BufReader, Write};
@@ -333,8 +345,17 @@ impl Service {
                 request.len()
             ));
         }
-        let request: ServiceRequest =
-            serde_json::from_slice(request).map_err(|e| format!("not a service request: {e}"))?;
+        let request: ServiceRequest = serde_json::from_slice(request).map_err(|e| {
+            // Python's json module writes NaN and Infinity by default; serde only says "expected
+            // value", which does not point at the number.
+            let text = String::from_utf8_lossy(request);
+            let hint = if text.contains("NaN") || text.contains("Infinity") {
+                " (NaN and Infinity are not JSON numbers: send finite values)"
+            } else {
+                ""
+            };
+            format!("not a service request: {e}{hint}")
+        })?;
         match request.body.command.as_str() {
             "status" => Ok(self.status()),
             "start" => {
@@ -374,6 +395,24 @@ impl Service {
                 Ok(json!({"inspections": 0}))
             }
             "align" => self.align(),
+            "align-cloud" => {
+                let job = crate::align_cloud::from_request(
+                    &request.body,
+                    &self.state.template.part,
+                    &self.state.folder,
+                )
+                .map_err(|e| e.0)?;
+                let output = crate::align_cloud::align(&job).map_err(|e| e.0)?;
+                serde_json::to_value(output).map_err(|e| e.to_string())
+            }
+            "diagnose" => {
+                // Exactly what `save` would write: the template's robot, tool and part with the
+                // inspections in memory.
+                let session = LoadedSession::resolve(self.session_file(), &self.state.folder)
+                    .map_err(|e| e.0)?;
+                let diagnosed = crate::diagnose::diagnose_session(&session).map_err(|e| e.0)?;
+                serde_json::to_value(diagnosed.output(None)).map_err(|e| e.to_string())
+            }
             "save" => {
                 let path = request.body.path.ok_or("save needs a 'path'")?;
                 let mut file = self.session_file();
@@ -423,7 +462,7 @@ impl Service {
                 Ok(json!({"inspections": self.state.inspections.len()}))
             }
             other => Err(format!(
-                "unknown command '{other}' (expected status, start, stop, get, list, remove, reset, align, save or load)"
+                "unknown command '{other}' (expected status, start, stop, get, list, remove, reset, align, align-cloud, diagnose, save or load)"
             )),
         }
     }

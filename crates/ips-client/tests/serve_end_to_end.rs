@@ -1,6 +1,7 @@
 //! `ips serve` over real sockets with sim-robot and robot-bridge: inspections captured from the
-//! live stream, journaled, restored after a restart, aligned to the hidden truth; stale data and
-//! bad requests refused with reasons.
+//! live stream, journaled, restored after a restart, aligned to the hidden truth and diagnosed
+//! (the same document as the offline command on the saved session); stale data and bad requests
+//! refused with reasons.
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
@@ -32,6 +33,32 @@ fn call(socket: &zmq::Socket, body: Value) -> Value {
     let reply: Value = serde_json::from_slice(&socket.recv_bytes(0).unwrap()).unwrap();
     assert_eq!(reply["header"]["type"], "reply");
     reply["body"].clone()
+}
+
+/// The keys DESIGN.md 6.4 promises for `ips diagnose --json`.
+const DIAGNOSIS_KEYS: [&str; 8] = [
+    "verdict",
+    "effect",
+    "alternatives",
+    "before",
+    "after",
+    "pose_before",
+    "pose_after",
+    "inspections",
+];
+
+/// Runs the `ips` binary and parses its one JSON document.
+fn ips(args: &[&str]) -> Value {
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap()
 }
 
 fn serve(config: &ServeConfig) -> ServeHandle {
@@ -98,6 +125,11 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
     sub.set_rcvtimeo(5000).unwrap();
     sub.set_subscribe(b"").unwrap();
     sub.connect(&bridge.pub_endpoint).unwrap();
+
+    // Nothing to diagnose yet: refused with the reason, and the service goes on.
+    let refused = call(&client, json!({"command": "diagnose"}));
+    assert_eq!(refused["ok"], false, "{refused}");
+    assert!(refused["reason"].as_str().is_some_and(|r| !r.is_empty()));
 
     // Before mirroring there is no live data: get is refused with the reason.
     let refused = call(&client, json!({"command": "get"}));
@@ -170,6 +202,15 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         assert!((got - want).abs() < 1e-6, "xyz[{axis}]: {got} vs {want}");
     }
 
+    // Diagnose over the socket: the DESIGN 6.4 document of the inspections in memory...
+    let diagnosed = call(&client, json!({"command": "diagnose"}));
+    assert_eq!(diagnosed["ok"], true, "{diagnosed}");
+    let diagnosis = &diagnosed["data"];
+    for key in DIAGNOSIS_KEYS {
+        assert!(diagnosis.get(key).is_some(), "missing {key}: {diagnosis}");
+    }
+    assert_eq!(diagnosis["inspections"].as_array().unwrap().len(), 9);
+
     // Save, reset, load: the list comes back from the file.
     let saved = folder.join("saved.json");
     let reply = call(
@@ -177,6 +218,16 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         json!({"command": "save", "path": saved.to_str().unwrap()}),
     );
     assert_eq!(reply["data"]["inspections"], 9, "{reply}");
+    // ...and the offline command on the saved session says the same, number for number.
+    let offline = ips(&["diagnose", saved.to_str().unwrap(), "--json"]);
+    assert_eq!(offline["verdict"], diagnosis["verdict"]);
+    for key in DIAGNOSIS_KEYS {
+        assert_eq!(offline[key], diagnosis[key], "{key}");
+    }
+    // The client command asks the running service.
+    let asked = ips(&["diagnose", "--service", &service.rep_endpoint, "--json"]);
+    assert_eq!(asked["verdict"], diagnosis["verdict"]);
+    assert_eq!(asked["after"], diagnosis["after"]);
     assert_eq!(
         call(&client, json!({"command": "reset"}))["data"]["inspections"],
         0
