@@ -106,7 +106,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     wrong_radius.inspections = bigger_ball
         .into_iter()
         .enumerate()
-        .map(|(index, q)| ips_client::session::Inspection {
+        .map(|(index, q)| Inspection {
             id: (index + 1).to_string(),
             q,
             qd: None,

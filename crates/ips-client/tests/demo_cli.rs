@@ -2,15 +2,11 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
-use std::path::PathBuf;
 use std::process::Command;
 
 /// The demo starts the sibling binaries; `cargo test -p ips-client` alone does not build them.
+/// Always asks cargo (a no-op when they are current): an existing binary may be stale.
 fn ensure_services_built() {
-    let ips = PathBuf::from(env!("CARGO_BIN_EXE_ips"));
-    if ips.with_file_name("sim-robot").exists() && ips.with_file_name("robot-bridge").exists() {
-        return;
-    }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
     let status = Command::new(cargo)
         .args(["build", "-p", "sim-robot", "-p", "robot-bridge"])
@@ -72,8 +68,9 @@ fn demo_refuses_robots_it_cannot_simulate() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("expected ur10, ur10e or iiwa14"));
 }
 
-/// The simulated cell carries an undeclared effect; the demo's diagnosis must name it, estimate
-/// it within 3 standard errors and leave the part pose better than plain alignment.
+/// The simulated cell carries an undeclared effect; the demo's diagnosis must name it as its best
+/// candidate, estimate it within 3 standard errors and leave the part pose better than plain
+/// alignment.
 fn demo_with(effect: &str, parameter: &str, truth: f64) {
     ensure_services_built();
     let output = Command::new(env!("CARGO_BIN_EXE_ips"))
@@ -87,8 +84,12 @@ fn demo_with(effect: &str, parameter: &str, truth: f64) {
     );
     let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let diagnosis = &result["diagnosis"];
-    assert_eq!(diagnosis["verdict"], "effect", "{diagnosis}");
-    assert_eq!(diagnosis["effect"]["name"], effect);
+    // With 16 touches and the declared 50 um noise, some pairs (a larger ball and a longer TCP)
+    // stay within the ambiguity margin: the diagnosis may say so, but its best candidate must
+    // be the simulated effect and modelling it must help.
+    let verdict = diagnosis["verdict"].as_str().unwrap();
+    assert!(verdict == "effect" || verdict == "ambiguous", "{diagnosis}");
+    assert_eq!(diagnosis["effect"]["name"], effect, "{diagnosis}");
     let estimate = diagnosis["effect"]["params"][parameter].as_f64().unwrap();
     let stderr = diagnosis["effect"]["stderr"][parameter].as_f64().unwrap();
     assert!(
@@ -97,10 +98,15 @@ fn demo_with(effect: &str, parameter: &str, truth: f64) {
     );
     let before = result["pose_error_m"].as_f64().unwrap();
     let after = result["pose_error_after_diagnosis_m"].as_f64().unwrap();
-    assert!(
-        after < before,
-        "pose error {after} after modelling, {before} before"
-    );
+    if verdict == "effect" {
+        assert!(
+            after < before,
+            "pose error {after} after modelling, {before} before"
+        );
+    } else {
+        // Ambiguous: nothing is applied, so the pose is left as aligned, never made worse.
+        assert!(after <= before + 1e-9, "{after} vs {before}");
+    }
 }
 
 #[test]
@@ -116,4 +122,10 @@ fn demo_finds_an_undeclared_part_scale() {
 #[test]
 fn demo_finds_an_undeclared_tcp_offset() {
     demo_with("tcp_offset", "dz_m", 0.0015);
+}
+
+#[test]
+fn demo_finds_undeclared_encoder_offsets() {
+    // The diagnosis reports the correction to the encoders: minus what the simulator added.
+    demo_with("joint_offsets", "joint_3_rad", 0.002);
 }

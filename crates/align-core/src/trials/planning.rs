@@ -247,10 +247,19 @@ impl Reach<'_> {
         };
         let mut axes = probe_axes(&normal_base, self.options.max_tilt_rad);
         if self.options.vary_tilt {
-            let levels = [0.0, 0.5, 1.0].map(|f| f * self.options.max_tilt_rad);
+            // Head-on, half, full tilt, then full tilt the other way round: a ball-radius error
+            // moves every touch along its normal, a TCP shift only as far as the probe axis
+            // leans, and opposite leans tell the TCP's sideways shifts apart.
+            let levels = [0.0, 0.5, 1.0, 1.0].map(|f| f * self.options.max_tilt_rad);
             let preferred = levels[index % levels.len()];
-            // Stable: within a tilt level the downward-first order stays.
-            axes.sort_by_key(|(_, tilt)| (tilt - preferred).abs() > 1e-9);
+            let at_level = |tilt: &f64| (tilt - preferred).abs() <= 1e-9;
+            let (mut first, rest): (Vec<_>, Vec<_>) =
+                axes.into_iter().partition(|(_, tilt)| at_level(tilt));
+            if index % levels.len() == 3 {
+                first.reverse();
+            }
+            first.extend(rest);
+            axes = first;
         }
         for (probe, tilt) in axes {
             let axis_out_part = self.base_from_part.rotation.inverse() * -probe;
