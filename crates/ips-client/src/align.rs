@@ -79,7 +79,11 @@ pub fn options_for(args: &AlignArgs, tip_radius_m: f64) -> PsaOptions {
 }
 
 pub fn run(args: &AlignArgs) -> Result<AlignOutput, BadInput> {
-    let session = LoadedSession::load(&args.session)?;
+    let path = args
+        .session
+        .as_ref()
+        .ok_or_else(|| BadInput("align needs a SESSION file or --service ENDPOINT".to_owned()))?;
+    let session = LoadedSession::load(path)?;
     let target = PsaTarget::new(&session.mesh)
         .with_faces(&session.faces)
         .map_err(BadInput::new)?;

@@ -31,7 +31,9 @@ pub enum Command {
     )]
     Trials(TrialsArgs),
     /// Point Set Alignment: move the session's part until it matches its inspections.
-    #[command(after_help = "Example:\n  ips align examples/step_block_ur10/session.json --json")]
+    #[command(
+        after_help = "Examples:\n  ips align examples/step_block_ur10/session.json --json\n  ips align --service tcp://127.0.0.1:4000      (the running service's inspections)"
+    )]
     Align(AlignArgs),
     /// Point Cloud Alignment: move a part's mesh until it matches a scanner cloud (here, or
     /// by the running service with --service).
@@ -123,8 +125,12 @@ pub struct RemoveArgs {
 #[derive(Debug, Args)]
 pub struct AlignArgs {
     /// Session file (cobot-align/session@1; paths inside are relative to it).
-    #[arg(value_name = "SESSION")]
-    pub session: PathBuf,
+    #[arg(value_name = "SESSION", required_unless_present = "service")]
+    pub session: Option<PathBuf>,
+    /// Ask the running service (`ips serve`) to align its inspections instead, with its
+    /// defaults (global search, point-to-plane, coherence).
+    #[arg(long, value_name = "ENDPOINT", conflicts_with_all = ["session", "local", "point_to_point", "no_coherence"])]
+    pub service: Option<String>,
     /// One local alignment from the nominal pose (the thesis's behaviour), no global search.
     #[arg(long)]
     pub local: bool,

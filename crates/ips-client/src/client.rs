@@ -34,6 +34,28 @@ pub fn call_with_path(
     })
 }
 
+/// The service's align reply for people: the pose, the residual and how the search went.
+pub fn align_text(data: &Value) -> String {
+    let numbers = |key: &str| -> Vec<String> {
+        (0..3)
+            .map(|i| format!("{:.6}", data["pose"][key][i].as_f64().unwrap_or(f64::NAN)))
+            .collect()
+    };
+    let mut text = format!(
+        "base_from_part: xyz [m] {}, rpy [rad] {}\nresidual rms {:.4} mm, max {:.4} mm, {} iterations in {:.1} ms\n",
+        numbers("xyz").join(" "),
+        numbers("rpy").join(" "),
+        data["rms"].as_f64().unwrap_or(f64::NAN) * 1e3,
+        data["max"].as_f64().unwrap_or(f64::NAN) * 1e3,
+        data["iterations"],
+        data["time_s"].as_f64().unwrap_or(f64::NAN) * 1e3,
+    );
+    if data["ambiguous"] == true {
+        text += "AMBIGUOUS: other poses fit these touches as well (see --json candidates)\n";
+    }
+    text
+}
+
 /// Sends one request to the service at `endpoint` and returns the reply's data; a refused
 /// request is bad input (exit 2) with the service's reason.
 pub fn request_data(endpoint: &str, request: &protocol::ServiceRequest) -> Result<Value, BadInput> {

@@ -212,6 +212,30 @@ fn example_scan_aligned_by_the_service_recovers_the_true_pose() {
 }
 
 #[test]
+fn ips_align_asks_the_service_to_align_its_inspections() {
+    let fixture = Fixture::start("align");
+    let endpoint = fixture.service.rep_endpoint.clone();
+    // No inspections: refused with the service's reason, exit 2.
+    assert_eq!(fixture.call(json!({"command": "reset"}))["ok"], true);
+    let empty = ips(&["align", "--service", &endpoint]);
+    assert_eq!(empty.status.code(), Some(2));
+    // The example session's nine touches, loaded into the service.
+    let loaded = fixture.call(json!({"command": "load", "path": example_str("session.json")}));
+    assert_eq!(loaded["ok"], true, "{loaded}");
+    let offline = json_stdout(&ips(&["align", &example_str("session.json"), "--json"]));
+    let asked = json_stdout(&ips(&["align", "--service", &endpoint, "--json"]));
+    assert_eq!(keys(&asked), keys(&offline));
+    let (translation_m, yaw_rad) = error_against_truth(&asked);
+    assert!(translation_m < 1e-6 && yaw_rad < 1e-6, "{asked}");
+    let text = String::from_utf8(ips(&["align", "--service", &endpoint]).stdout).unwrap();
+    assert!(text.starts_with("base_from_part: xyz [m] 0.62"), "{text}");
+    // The service aligns with its defaults: the thesis's switches are refused with --service.
+    let refused = ips(&["align", "--service", &endpoint, "--local"]);
+    assert_eq!(refused.status.code(), Some(2));
+    fixture.finish();
+}
+
+#[test]
 fn bad_align_cloud_requests_are_refused_with_a_reason_and_the_service_keeps_answering() {
     let fixture = Fixture::start("bad");
     let scan = example_str("scan.xyz");

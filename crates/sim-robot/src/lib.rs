@@ -7,18 +7,17 @@
 //!
 //! | request (JSON) | reply |
 //! | --- | --- |
-//! | `{"command":"status"}` | `{"ok":true,"time":s,"clients":n,"paused":b,"robot":"ur10"}` |
+//! | `{"command":"status"}` | `{"ok":true,"time":s,"clients":n,"paused":b,"robot":"ur10","at_rest":b,"fri":{...},"probe":{...}}` |
 //! | `{"command":"truth"}` | `{"ok":true,"time":s,"q":[...],"reported_q":[...]}` (now) |
 //! | `{"command":"truth_at","time":s}` | `{"ok":true,"time":s,"q":[...],"qd":[...],"reported_q":[...]}` |
-//!
-//! `q` is where the joints really are; `reported_q` what the controller streams (they differ by
-//! the encoder offsets of `effects`).
-//! | `{"command":"motion","motion":{"kind":"hold","q":[...]}}` or `{"kind":"sine",...}` | `{"ok":true}` |
+//! | `{"command":"motion","motion":{"kind":"hold","q":[...]}}`, `{"kind":"sine",...}` or `{"kind":"path","waypoints":[{"time_s","q"}]}` | `{"ok":true}` |
 //! | `{"command":"pause"}` / `{"command":"resume"}` | stop / restart sending data (connections stay) |
 //! | `{"command":"drop"}` | close every RTDE connection (clients may reconnect) |
 //! | `{"command":"effects","joint_offsets":[...]}` | encoder offsets (rad) the robot reports on top of its true joint angles, undeclared to everyone else |
+//! | `{"command":"probe","mesh":PATH,"base_from_part":{"xyz","rpy"},"tcp":{"xyz","rpy"},"tip_radius":m,...}` | plans 3-2-1 touches on the part at that (hidden) pose and runs them: `{"ok":true,"touches":n,"contacts":[{"from_s","until_s"}],"tilts_rad":[...],"end_s"}`; status then carries `"probe":{"touches","active_touch","at_rest","done"}` (module `probing`) |
 //!
-//! Errors reply `{"ok":false,"reason":"..."}`.
+//! Errors reply `{"ok":false,"reason":"..."}`. `q` is where the joints really are; `reported_q`
+//! what the controller streams (they differ by the encoder offsets of `effects`).
 //!
 //! iiwa mode emulates the Sunrise cabinet's FRI side ([`fri_server`]): a monitoring message to
 //! the client at `--fri-target` every send period, the session state and connection quality

@@ -36,6 +36,16 @@ fn run(command: Command) -> Result<String, BadInput> {
                 output.to_text()
             })
         }
+        Command::Align(args) if args.service.is_some() => {
+            let endpoint = args.service.as_deref().unwrap_or_default();
+            let data =
+                ips_client::client::request_data(endpoint, &protocol::service_request("align"))?;
+            Ok(if args.json {
+                json_line(&data)?
+            } else {
+                ips_client::client::align_text(&data)
+            })
+        }
         Command::Align(args) => {
             let output = ips_client::align::run(&args)?;
             Ok(if args.json {
