@@ -27,10 +27,15 @@ pub struct DemoArgs {
     pub robot: String,
     /// An effect the simulated cell has and the model does not declare: none, probe_radius
     /// (3.4 mm ball, 3 mm declared), tcp_offset (TCP 2.3 mm off), part_scale (part 0.4% larger
-    /// than its model), joint_offsets (encoder offsets of 1-2 mrad). With an effect the demo
+    /// than its model), joint_offsets (encoder offsets of 1-2 mrad), joint_compliance (two
+    /// joints sag under gravity, 3-4e-5 rad/(N m)), cyclic_encoder (an eccentric encoder on the
+    /// shoulder, 1 mrad twice per turn: outside the diagnosis library). With an effect the demo
     /// takes 16 tilted touches and runs the diagnosis.
     #[arg(long, default_value = "none")]
     pub effect: String,
+    /// Encoder noise of 20 urad on every joint of every sample (the session declares 50 um).
+    #[arg(long)]
+    pub noise: bool,
     /// Print one JSON document instead of text.
     #[arg(long)]
     pub json: bool,
@@ -277,7 +282,20 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     let dof = robot.home().len();
     // The cell as it physically is; the session above declares the nominal tool and part.
     let mut true_tcp = tcp;
-    let (mut true_radius, mut true_scale, mut encoder_offsets) = (tip_radius, 1.0, vec![0.0; dof]);
+    let (mut true_radius, mut true_scale) = (tip_radius, 1.0);
+    // What sim-robot's encoders get wrong (its `effects` request).
+    let mut encoders = serde_json::Map::new();
+    if args.noise {
+        encoders.insert("noise_sigma_rad".to_owned(), json!(2e-5));
+    }
+    let shoulder_and_elbow = |values: [f64; 2]| -> Vec<f64> {
+        let mut per_joint = vec![0.0; dof];
+        // UR: shoulder lift and elbow (joints 2 and 3); iiwa: joints 2 and 4.
+        let elbow = if robot == ShippedRobot::Iiwa14 { 3 } else { 2 };
+        per_joint[1] = values[0];
+        per_joint[elbow] = values[1];
+        per_joint
+    };
     match args.effect.as_str() {
         "none" => {}
         "probe_radius" => true_radius = 0.0034,
@@ -286,14 +304,32 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         }
         "part_scale" => true_scale = 1.004,
         "joint_offsets" => {
-            encoder_offsets = match robot {
+            let offsets = match robot {
                 ShippedRobot::Iiwa14 => vec![0.0, 0.0015, 0.0, -0.002, 0.0, 0.001, 0.0],
                 _ => vec![0.0, 0.0015, -0.002, 0.001, 0.0, 0.0],
-            }
+            };
+            encoders.insert("joint_offsets".to_owned(), json!(offsets));
+        }
+        "joint_compliance" => {
+            encoders.insert(
+                "compliance_rad_per_nm".to_owned(),
+                json!(shoulder_and_elbow([3e-5, 4e-5])),
+            );
+            // The tool the session declares: its mass at the TCP.
+            encoders.insert(
+                "payload".to_owned(),
+                json!({"mass_kg": 0.4, "com_in_flange": tcp.translation.vector.as_slice()}),
+            );
+        }
+        "cyclic_encoder" => {
+            encoders.insert(
+                "cyclic_encoder".to_owned(),
+                json!({"joint": 1, "amplitude_rad": 0.001, "cycles_per_turn": 2.0}),
+            );
         }
         other => {
             return Err(BadInput(format!(
-                "--effect '{other}': expected none, probe_radius, tcp_offset, part_scale or joint_offsets"
+                "--effect '{other}': expected none, probe_radius, tcp_offset, part_scale, joint_offsets, joint_compliance or cyclic_encoder"
             )));
         }
     }
@@ -336,11 +372,9 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     let context = zmq::Context::new();
     let client = zmq_socket(&context, zmq::REQ, &service.endpoint("rep")?)?;
     let control = zmq_socket(&context, zmq::REQ, &sim.endpoint("control")?)?;
-    if encoder_offsets.iter().any(|o| *o != 0.0) {
-        let reply = control_request(
-            &control,
-            &json!({"command": "effects", "joint_offsets": encoder_offsets}),
-        )?;
+    if !encoders.is_empty() {
+        encoders.insert("command".to_owned(), json!("effects"));
+        let reply = control_request(&control, &Value::Object(encoders))?;
         if reply["ok"] != true {
             return Err(BadInput(format!(
                 "sim-robot refused the effect: {}",

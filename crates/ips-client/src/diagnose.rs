@@ -289,6 +289,32 @@ impl DiagnoseOutput {
             mm(&self.after, "max"),
             mm(&self.after, "loo_rms")
         );
+        text += &format!(
+            "chi-square of the pose-only fit: {:.1} (99% threshold {:.1})\n",
+            self.chi_square[0], self.chi_square[1]
+        );
+        let pose = |v: &Value| {
+            let at = |k: &str, i: usize| v[k][i].as_f64().unwrap_or(f64::NAN);
+            align_core::pose::isometry_from_xyz_rpy(
+                [at("xyz", 0), at("xyz", 1), at("xyz", 2)],
+                [at("rpy", 0), at("rpy", 1), at("rpy", 2)],
+            )
+        };
+        let (before, after) = (pose(&self.pose_before), pose(&self.pose_after));
+        text += &format!(
+            "modelling it moved the part by {:.4} mm and {:.4} mrad\n",
+            (after.translation.vector - before.translation.vector).norm() * 1e3,
+            after.rotation.angle_to(&before.rotation) * 1e3
+        );
+        text += "touch  residual before (mm)  after (mm)\n";
+        for touch in &self.inspections {
+            text += &format!(
+                "{:>5}  {:>+20.4}  {:>+10.4}\n",
+                touch["id"].as_str().unwrap_or("?"),
+                touch["residual_before"].as_f64().unwrap_or(f64::NAN) * 1e3,
+                touch["residual_after"].as_f64().unwrap_or(f64::NAN) * 1e3
+            );
+        }
         for alternative in &self.alternatives {
             text += &format!(
                 "  not chosen: {}: {}\n",

@@ -129,3 +129,30 @@ fn demo_finds_undeclared_encoder_offsets() {
     // The diagnosis reports the correction to the encoders: minus what the simulator added.
     demo_with("joint_offsets", "joint_3_rad", 0.002);
 }
+
+#[test]
+fn demo_finds_undeclared_gravity_sag() {
+    demo_with("joint_compliance", "joint_2_rad_per_nm", 3e-5);
+}
+
+/// An eccentric encoder is outside the diagnosis library: the residual must be noticed, and no
+/// effect may be applied that leaves the part further from the truth.
+#[test]
+fn demo_with_an_effect_outside_the_library_is_never_made_worse() {
+    ensure_services_built();
+    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(["demo", "--effect", "cyclic_encoder", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let diagnosis = &result["diagnosis"];
+    assert_ne!(diagnosis["verdict"], "no_effect", "{diagnosis}");
+    let before = result["pose_error_m"].as_f64().unwrap();
+    let after = result["pose_error_after_diagnosis_m"].as_f64().unwrap();
+    assert!(after <= before + 1e-9, "{after} after vs {before} before");
+}

@@ -13,7 +13,7 @@
 //! | `{"command":"motion","motion":{"kind":"hold","q":[...]}}`, `{"kind":"sine",...}` or `{"kind":"path","waypoints":[{"time_s","q"}]}` | `{"ok":true}` |
 //! | `{"command":"pause"}` / `{"command":"resume"}` | stop / restart sending data (connections stay) |
 //! | `{"command":"drop"}` | close every RTDE connection (clients may reconnect) |
-//! | `{"command":"effects","joint_offsets":[...]}` | encoder offsets (rad) the robot reports on top of its true joint angles, undeclared to everyone else |
+//! | `{"command":"effects","joint_offsets":[...],"compliance_rad_per_nm":[...],"payload":{...},"cyclic_encoder":{...},"noise_sigma_rad":s}` | what the encoders report differs from the true joint angles, undeclared to everyone else (module `effects`; absent fields are no effect) |
 //! | `{"command":"probe","mesh":PATH,"base_from_part":{"xyz","rpy"},"tcp":{"xyz","rpy"},"tip_radius":m,...}` | plans 3-2-1 touches on the part at that (hidden) pose and runs them: `{"ok":true,"touches":n,"contacts":[{"from_s","until_s"}],"tilts_rad":[...],"end_s"}`; status then carries `"probe":{"touches","active_touch","at_rest","done"}` (module `probing`) |
 //!
 //! Errors reply `{"ok":false,"reason":"..."}`. `q` is where the joints really are; `reported_q`
@@ -26,6 +26,7 @@
 //! stops sending and `drop` closes the FRI session (a new one starts from sequence 0 on a new
 //! source port).
 
+mod effects;
 mod fri_server;
 pub mod motion;
 mod probing;
@@ -164,8 +165,8 @@ pub(crate) struct Shared {
     pub(crate) controller_version: [u32; 4],
     started: Instant,
     motion: Mutex<Motion>,
-    /// Encoder offsets added to the reported joint angles (an undeclared effect).
-    encoder_offsets: Mutex<Vec<f64>>,
+    /// What the encoders get wrong (undeclared effects).
+    effects: Mutex<effects::Effects>,
     chain: Chain,
     limits: Vec<(f64, f64)>,
     /// The FRI link as the emulated controller sees it (iiwa mode).
@@ -185,15 +186,15 @@ impl Shared {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .clone();
-        let offsets = self
-            .encoder_offsets
+        let effects = self
+            .effects
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .clone();
         let true_q = motion.position(time_s);
         // The controller only knows its encoders: it reports, and computes its TCP from, the
-        // offset angles.
-        let q: Vec<f64> = true_q.iter().zip(&offsets).map(|(q, o)| q + o).collect();
+        // angles they read.
+        let q = effects.reported(&self.chain, &true_q, time_s);
         let qd = motion.velocity(time_s);
         let (base_from_tool, jacobian): (Isometry3<f64>, _) = self.chain.jacobian_unchecked(&q);
         let t = base_from_tool.translation.vector;
@@ -315,7 +316,7 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         motion: Mutex::new(Motion::Hold {
             q: home(config.robot),
         }),
-        encoder_offsets: Mutex::new(vec![0.0; home(config.robot).len()]),
+        effects: Mutex::new(effects::Effects::default()),
         chain,
         limits,
         fri: Mutex::new(None),
@@ -518,26 +519,13 @@ fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value
             },
             Err(error) => failure(format!("bad motion: {error}")),
         },
-        Some("effects") => {
-            let offsets: Option<Vec<f64>> =
-                serde_json::from_value(request["joint_offsets"].clone()).ok();
-            match offsets {
-                Some(offsets)
-                    if offsets.len() == shared.limits.len()
-                        && offsets.iter().all(|o| o.is_finite() && o.abs() <= 0.1) =>
-                {
-                    *shared
-                        .encoder_offsets
-                        .lock()
-                        .unwrap_or_else(|p| p.into_inner()) = offsets;
-                    json!({"ok": true})
-                }
-                _ => failure(format!(
-                    "effects needs 'joint_offsets': {} finite values within +-0.1 rad",
-                    shared.limits.len()
-                )),
+        Some("effects") => match effects::Effects::from_request(&request, shared.limits.len()) {
+            Ok(effects) => {
+                *shared.effects.lock().unwrap_or_else(|p| p.into_inner()) = effects;
+                json!({"ok": true})
             }
-        }
+            Err(reason) => failure(reason),
+        },
         Some("probe") => probing::start(&request, shared).unwrap_or_else(failure),
         Some("pause") => {
             shared.paused.store(true, Ordering::Relaxed);
