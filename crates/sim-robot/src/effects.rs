@@ -70,13 +70,14 @@ impl Effects {
             ),
         ];
         for (name, values, bound) in per_joint {
-            if let Some(values) = values {
-                if values.len() != dof || !finite(values) || values.iter().any(|v| v.abs() > bound)
-                {
-                    return Err(format!(
-                        "effects: '{name}' needs {dof} finite values within +-{bound}"
-                    ));
-                }
+            if let Some(values) = values
+                && (values.len() != dof
+                    || !finite(values)
+                    || values.iter().any(|v| v.abs() > bound))
+            {
+                return Err(format!(
+                    "effects: '{name}' needs {dof} finite values within +-{bound}"
+                ));
             }
         }
         if effects
@@ -86,30 +87,27 @@ impl Effects {
         {
             return Err("effects: a compliance is never negative".to_owned());
         }
-        if let Some(payload) = &effects.payload {
-            if !(payload.mass_kg.is_finite() && (0.0..=50.0).contains(&payload.mass_kg))
-                || !finite(&payload.com_in_flange)
-            {
-                return Err(
-                    "effects: payload mass_kg must be within 0-50 and com finite".to_owned(),
-                );
-            }
+        if let Some(payload) = &effects.payload
+            && !(payload.mass_kg.is_finite()
+                && (0.0..=50.0).contains(&payload.mass_kg)
+                && finite(&payload.com_in_flange))
+        {
+            return Err("effects: payload mass_kg must be within 0-50 and com finite".to_owned());
         }
-        if let Some(cyclic) = &effects.cyclic_encoder {
-            if cyclic.joint >= dof
+        if let Some(cyclic) = &effects.cyclic_encoder
+            && (cyclic.joint >= dof
                 || !(cyclic.amplitude_rad.is_finite() && cyclic.amplitude_rad.abs() <= 0.01)
                 || !(cyclic.cycles_per_turn.is_finite()
-                    && (1.0..=1000.0).contains(&cyclic.cycles_per_turn))
-            {
-                return Err(format!(
-                    "effects: cyclic_encoder needs joint < {dof}, |amplitude_rad| <= 0.01 and cycles_per_turn 1-1000"
-                ));
-            }
+                    && (1.0..=1000.0).contains(&cyclic.cycles_per_turn)))
+        {
+            return Err(format!(
+                "effects: cyclic_encoder needs joint < {dof}, |amplitude_rad| <= 0.01 and cycles_per_turn 1-1000"
+            ));
         }
-        if let Some(sigma) = effects.noise_sigma_rad {
-            if !(sigma.is_finite() && (0.0..=0.01).contains(&sigma)) {
-                return Err("effects: noise_sigma_rad must be within 0-0.01".to_owned());
-            }
+        if let Some(sigma) = effects.noise_sigma_rad
+            && !(sigma.is_finite() && (0.0..=0.01).contains(&sigma))
+        {
+            return Err("effects: noise_sigma_rad must be within 0-0.01".to_owned());
         }
         Ok(effects)
     }
