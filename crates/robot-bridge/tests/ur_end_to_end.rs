@@ -200,8 +200,40 @@ fn controller_loss_is_detected_recovered_and_counted() {
     let after = next_state(&sub);
     assert!(after["body"]["seq"].as_u64().unwrap() > last_seq);
 
-    // Controller gone for good: loss reported, start refused with the reason.
+    // The controller killed and started again on its port: the bridge reconnects by itself,
+    // the stream resumes and its sequence continues.
     let mut cell = cell;
+    let port = cell.sim.as_ref().unwrap().rtde_port().unwrap();
+    let last_seq = next_state(&sub)["body"]["seq"].as_u64().unwrap();
+    let reconnects_before =
+        wait_status(&cell, Duration::from_secs(1), |_| true)["body"]["reconnects"]
+            .as_u64()
+            .unwrap();
+    cell.sim.take().unwrap().stop();
+    wait_status(&cell, Duration::from_secs(10), |s| {
+        s["controller"] != "connected"
+    });
+    cell.sim = Some(
+        sim_robot::start(&sim_robot::Config {
+            robot: ShippedRobot::Ur10e,
+            rtde_listen: format!("127.0.0.1:{port}"),
+            control: "tcp://127.0.0.1:*".to_owned(),
+            fri: sim_robot::FriSettings::default(),
+        })
+        .unwrap(),
+    );
+    let status = wait_status(&cell, Duration::from_secs(10), |s| {
+        s["controller"] == "connected"
+    });
+    assert!(
+        status["body"]["reconnects"].as_u64().unwrap() > reconnects_before,
+        "{status}"
+    );
+    sub.set_rcvtimeo(5000).unwrap();
+    let resumed = next_state(&sub);
+    assert!(resumed["body"]["seq"].as_u64().unwrap() > last_seq);
+
+    // Controller gone for good: loss reported, start refused with the reason.
     cell.sim.take().unwrap().stop();
     let status = wait_status(&cell, Duration::from_secs(10), |s| {
         s["controller"] != "connected"
