@@ -195,9 +195,18 @@ impl SessionDiagnosis {
     }
 }
 
-/// Residual per touch, before (grey) and after (blue), with the +-2 sigma band.
+/// Height of the scatter panel under the bars, px.
+const SCATTER_HEIGHT: f64 = 320.0;
+
+/// Residual per touch, before (grey) and after (blue), with the +-2 sigma band; below, each
+/// touch's residual against what the chosen effect explains of it (on the diagonal when the
+/// effect accounts for the residual).
 fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
-    let (width, height, margin) = (80.0 + 40.0 * samples.len() as f64, 320.0, 40.0);
+    let (width, height, margin) = (
+        (80.0 + 40.0 * samples.len() as f64).max(2.0 * SCATTER_HEIGHT),
+        320.0,
+        40.0,
+    );
     let largest = diagnosis
         .before
         .residuals_m
@@ -206,11 +215,12 @@ fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
         .fold(3.0 * sigma, |m, r| m.max(r.abs()));
     let y = |value: f64| height / 2.0 - value / largest * (height / 2.0 - margin);
     let mut out = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n\
          <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
          <text x=\"10\" y=\"18\">Residual per touch (mm): before (grey), after {} (blue); band = +-2 sigma. Verdict: {}</text>\n\
          <rect x=\"{margin}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#e8f0e8\"/>\n\
          <line x1=\"{margin}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\"/>\n",
+        height + SCATTER_HEIGHT,
         diagnosis
             .effect
             .as_ref()
@@ -257,9 +267,54 @@ fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
         largest * 1e3
     );
     out += &format!(
-        "<text x=\"5\" y=\"{:.1}\">{:+.3}</text>\n</svg>\n",
+        "<text x=\"5\" y=\"{:.1}\">{:+.3}</text>\n",
         y(-largest) + 4.0,
         -largest * 1e3
+    );
+    out += &scatter(diagnosis, samples, largest, height);
+    out += "</svg>\n";
+    out
+}
+
+/// The lower panel: residual before (y) against the part the effect explains (x), both mm.
+fn scatter(diagnosis: &Diagnosis, samples: &[TouchSample], largest: f64, top: f64) -> String {
+    let Some((name, _)) = diagnosis.effect.as_ref() else {
+        return format!(
+            "<text x=\"10\" y=\"{:.1}\">No effect applied: nothing to plot against.</text>\n",
+            top + 30.0
+        );
+    };
+    let (left, size) = (60.0, SCATTER_HEIGHT - 60.0);
+    let to_px = |value: f64| size / 2.0 * (1.0 - value / largest);
+    let mut out = format!(
+        "<text x=\"10\" y=\"{:.1}\">Residual before (y) against what {name} explains of it (x), mm; on the diagonal = explained</text>\n\
+         <rect x=\"{left}\" y=\"{:.1}\" width=\"{size}\" height=\"{size}\" fill=\"none\" stroke=\"#ccc\"/>\n\
+         <line x1=\"{left}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#2a6fdb\" stroke-dasharray=\"4 3\"/>\n",
+        top + 20.0,
+        top + 40.0,
+        top + 40.0 + size,
+        left + size,
+        top + 40.0
+    );
+    for (i, sample) in samples.iter().enumerate() {
+        let before = diagnosis.before.residuals_m[i];
+        let explained = before - diagnosis.after.residuals_m[i];
+        out += &format!(
+            "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"#444\"><title>{} explained {:+.4} of {:+.4} mm</title></circle>\n",
+            left + size - to_px(explained),
+            top + 40.0 + to_px(before),
+            sample.id,
+            explained * 1e3,
+            before * 1e3
+        );
+    }
+    out += &format!(
+        "<text x=\"{left}\" y=\"{:.1}\">{:+.3}</text><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{:+.3}</text>\n",
+        top + 55.0 + size,
+        -largest * 1e3,
+        left + size,
+        top + 55.0 + size,
+        largest * 1e3
     );
     out
 }
