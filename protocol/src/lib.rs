@@ -376,6 +376,10 @@ pub struct ServiceRequestBody {
     /// (align-cloud; default false).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub local: Option<bool>,
+    /// The controller time of the touch, s (get; e.g. a touch-trigger probe's signal): the
+    /// sample at or just after it is captured instead of the latest.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<f64>,
 }
 
 /// A pose as the session file writes it: position x, y, z (m) and fixed-axis roll, pitch, yaw
@@ -422,6 +426,7 @@ pub fn service_request(command: &str) -> ServiceRequest {
             point_to_point: None,
             cos_squared: None,
             local: None,
+            time_s: None,
         },
     }
 }
@@ -452,6 +457,7 @@ impl Message for ServiceRequest {
             ("cloud_scale", body.cloud_scale),
             ("mesh_scale", body.mesh_scale),
             ("delta_m", body.delta_m),
+            ("time_s", body.time_s),
         ];
         for (name, value) in scalars {
             if value.is_some_and(|v| !v.is_finite()) {

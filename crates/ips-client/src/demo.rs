@@ -29,8 +29,9 @@ pub struct DemoArgs {
     /// (3.4 mm ball, 3 mm declared), tcp_offset (TCP 2.3 mm off), part_scale (part 0.4% larger
     /// than its model), joint_offsets (encoder offsets of 1-2 mrad), joint_compliance (two
     /// joints sag under gravity, 3-4e-5 rad/(N m)), cyclic_encoder (an eccentric encoder on the
-    /// shoulder, 1 mrad twice per turn: outside the diagnosis library). With an effect the demo
-    /// takes 16 tilted touches and runs the diagnosis.
+    /// shoulder, 1 mrad twice per turn: outside the diagnosis library), trigger_latency (touches
+    /// taken on the fly at 1-4 mm/s, each sample 50 ms later than its trigger time stamp). With an
+    /// effect the demo takes 16 tilted touches and runs the diagnosis.
     #[arg(long, default_value = "none")]
     pub effect: String,
     /// Encoder noise of 20 urad on every joint of every sample (the session declares 50 um).
@@ -321,6 +322,9 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
                 json!({"mass_kg": 0.4, "com_in_flange": tcp.translation.vector.as_slice()}),
             );
         }
+        "trigger_latency" => {
+            encoders.insert("trigger_latency_s".to_owned(), json!(0.05));
+        }
         "cyclic_encoder" => {
             encoders.insert(
                 "cyclic_encoder".to_owned(),
@@ -329,7 +333,7 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         }
         other => {
             return Err(BadInput(format!(
-                "--effect '{other}': expected none, probe_radius, tcp_offset, part_scale, joint_offsets, joint_compliance or cyclic_encoder"
+                "--effect '{other}': expected none, probe_radius, tcp_offset, part_scale, joint_offsets, joint_compliance, trigger_latency or cyclic_encoder"
             )));
         }
     }
@@ -348,6 +352,13 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
         "vary_tilt": args.effect != "none",
         "dwell_s": 0.3,
     });
+    // A latency shows only on touches taken while moving, at different speeds (at rest a late
+    // sample is the same sample; at one speed it looks like a larger ball).
+    let on_the_fly = args.effect == "trigger_latency";
+    let mut probe_request = probe_request;
+    if on_the_fly {
+        probe_request["on_the_fly_speeds_m_s"] = json!([0.001, 0.0025, 0.004]);
+    }
 
     progress("starting sim-robot, robot-bridge and the alignment service");
     let (mut sim, mut bridge) = start_cell(robot, &sim_program, &bridge_program)?;
@@ -434,16 +445,21 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
             let probe = &status["probe"];
             // At rest by the simulator's clock; the bridge's newest sample may be one period
             // older, so let the contact settle for a few sample periods first.
-            let settled = status["time"].as_f64().unwrap_or(0.0)
-                >= planned["contacts"][index]["from_s"]
-                    .as_f64()
-                    .unwrap_or(f64::MAX)
-                    + SETTLE_S;
-            if probe["active_touch"].as_u64() == Some(index as u64)
-                && status["at_rest"] == true
-                && settled
-            {
-                break;
+            let contact = &planned["contacts"][index];
+            let now_s = status["time"].as_f64().unwrap_or(0.0);
+            if on_the_fly {
+                // Past the contact far enough for the stream to hold the trigger's sample.
+                if now_s >= contact["at_s"].as_f64().unwrap_or(f64::MAX) + SETTLE_S {
+                    break;
+                }
+            } else {
+                let settled = now_s >= contact["from_s"].as_f64().unwrap_or(f64::MAX) + SETTLE_S;
+                if probe["active_touch"].as_u64() == Some(index as u64)
+                    && status["at_rest"] == true
+                    && settled
+                {
+                    break;
+                }
             }
             if probe["done"] == true {
                 return Err(BadInput(format!(
@@ -462,7 +478,14 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
             }
             std::thread::sleep(Duration::from_millis(10));
         }
-        let reply = request(&client, json!({"command": "get"}), "get")?;
+        // On the fly, the touch is the sample at the trigger's time stamp, as a touch-trigger
+        // probe wired to the controller would give it.
+        let get = if on_the_fly {
+            json!({"command": "get", "time_s": planned["contacts"][index]["at_s"]})
+        } else {
+            json!({"command": "get"})
+        };
+        let reply = request(&client, get, "get")?;
         if reply["body"]["ok"] != true {
             return Err(BadInput(format!(
                 "get refused at touch {}: {}",

@@ -27,6 +27,7 @@
 //! subscription runs in its own thread and is never blocked by requests, so the live sample a
 //! `get` takes after a slow request is as fresh as ever.
 
+use std::collections::VecDeque;
 use std::fs::{File, OpenOptions};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
@@ -220,14 +221,23 @@ pub fn start(config: &ServeConfig) -> Result<ServeHandle, String> {
     sub.connect(&config.bridge_pub)
         .map_err(|e| format!("{}: {e}", config.bridge_pub))?;
     let latest: Arc<Mutex<Option<LatestSample>>> = Arc::new(Mutex::new(None));
+    let history: Arc<Mutex<VecDeque<LatestSample>>> = Arc::new(Mutex::new(VecDeque::new()));
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
     {
-        let (latest, stop) = (Arc::clone(&latest), Arc::clone(&stop));
-        threads.push(thread::spawn(move || subscribe_loop(sub, latest, stop)));
+        let (latest, history, stop) =
+            (Arc::clone(&latest), Arc::clone(&history), Arc::clone(&stop));
+        threads.push(thread::spawn(move || {
+            subscribe_loop(sub, latest, history, stop)
+        }));
     }
     {
-        let (latest, stop, config) = (Arc::clone(&latest), Arc::clone(&stop), config.clone());
+        let (latest, history, stop, config) = (
+            Arc::clone(&latest),
+            Arc::clone(&history),
+            Arc::clone(&stop),
+            config.clone(),
+        );
         let tool = loaded.tool.clone();
         let chain = loaded.chain.clone();
         threads.push(thread::spawn(move || {
@@ -235,6 +245,7 @@ pub fn start(config: &ServeConfig) -> Result<ServeHandle, String> {
             let mut service = Service {
                 state,
                 latest,
+                history,
                 config,
                 context,
                 chain,
@@ -253,9 +264,13 @@ pub fn start(config: &ServeConfig) -> Result<ServeHandle, String> {
     })
 }
 
+/// Samples kept for a get at a given controller time: 4 s at 1 kHz, 8 s at 500 Hz.
+const HISTORY_SAMPLES: usize = 4096;
+
 fn subscribe_loop(
     sub: zmq::Socket,
     latest: Arc<Mutex<Option<LatestSample>>>,
+    history: Arc<Mutex<VecDeque<LatestSample>>>,
     stop: Arc<AtomicBool>,
 ) {
     while !stop.load(Ordering::Relaxed) {
@@ -268,18 +283,35 @@ fn subscribe_loop(
         if message.body.validate().is_err() {
             continue;
         }
-        *latest.lock().unwrap_or_else(|p| p.into_inner()) = Some(LatestSample {
+        let sample = LatestSample {
             q: message.body.position,
             qd: message.body.velocity,
             controller_time: message.body.controller_time,
             received: Instant::now(),
-        });
+        };
+        {
+            let mut history = history.lock().unwrap_or_else(|p| p.into_inner());
+            // A controller restart starts its clock again: older samples would be found first.
+            if history
+                .back()
+                .is_some_and(|last| last.controller_time > sample.controller_time)
+            {
+                history.clear();
+            }
+            history.push_back(sample.clone());
+            while history.len() > HISTORY_SAMPLES {
+                history.pop_front();
+            }
+        }
+        *latest.lock().unwrap_or_else(|p| p.into_inner()) = Some(sample);
     }
 }
 
 struct Service {
     state: State,
     latest: Arc<Mutex<Option<LatestSample>>>,
+    /// The last [`HISTORY_SAMPLES`] samples, for a get at a given controller time.
+    history: Arc<Mutex<VecDeque<LatestSample>>>,
     config: ServeConfig,
     context: zmq::Context,
     chain: align_core::kinematics::Chain,
@@ -368,7 +400,7 @@ impl Service {
                 self.state.mirroring = false;
                 Ok(json!({"mirroring": false}))
             }
-            "get" => self.get(),
+            "get" => self.get(request.body.time_s),
             "list" => Ok(json!({"inspections": self.state.inspections})),
             "remove" => {
                 let unknown: Vec<&String> = request
@@ -488,7 +520,9 @@ impl Service {
         })
     }
 
-    fn get(&mut self) -> Result<Value, String> {
+    /// Captures the latest sample, or with `time_s` the first sample at or after that controller
+    /// time (a touch-trigger probe's time stamp), as an inspection.
+    fn get(&mut self, time_s: Option<f64>) -> Result<Value, String> {
         let latest = self
             .latest
             .lock()
@@ -502,6 +536,10 @@ impl Service {
                 self.config.max_sample_age_s
             ));
         }
+        let latest = match time_s {
+            None => latest,
+            Some(time_s) => self.sample_at(time_s)?,
+        };
         let (base_from_flange, jacobian) = {
             self.chain
                 .check_joints(&latest.q)
@@ -533,6 +571,26 @@ impl Service {
         self.state.next_id += 1;
         self.state.inspections.push(inspection.clone());
         Ok(serde_json::to_value(&inspection).unwrap_or(Value::Null))
+    }
+
+    /// The first recorded sample at or after controller time `time_s`, at most 50 ms after it.
+    fn sample_at(&self, time_s: f64) -> Result<LatestSample, String> {
+        if !time_s.is_finite() {
+            return Err("get: time_s must be a finite controller time".to_owned());
+        }
+        let history = self.history.lock().unwrap_or_else(|p| p.into_inner());
+        let found = history
+            .iter()
+            .find(|sample| sample.controller_time >= time_s - 1e-9);
+        match found {
+            Some(sample) if sample.controller_time - time_s <= 0.05 => Ok(sample.clone()),
+            _ => Err(format!(
+                "no joint sample at controller time {time_s:.4} s (the {} kept cover {:.4}-{:.4} s)",
+                history.len(),
+                history.front().map_or(f64::NAN, |s| s.controller_time),
+                history.back().map_or(f64::NAN, |s| s.controller_time)
+            )),
+        }
     }
 
     fn align(&self) -> Result<Value, String> {

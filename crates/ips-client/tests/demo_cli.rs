@@ -156,3 +156,8 @@ fn demo_with_an_effect_outside_the_library_is_never_made_worse() {
     let after = result["pose_error_after_diagnosis_m"].as_f64().unwrap();
     assert!(after <= before + 1e-9, "{after} after vs {before} before");
 }
+
+#[test]
+fn demo_finds_an_undeclared_trigger_latency_on_the_fly() {
+    demo_with("trigger_latency", "latency_s", 0.05);
+}

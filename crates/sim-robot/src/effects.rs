@@ -9,6 +9,7 @@
 //! | `compliance_rad_per_nm: [..]` with `payload: {mass_kg, com_in_flange: [m]}` | gravity sag: the joints really sit c tau_g further than reported | `joint_compliance` |
 //! | `cyclic_encoder: {joint, amplitude_rad, cycles_per_turn}` | reported += a sin(n q) on one joint (an eccentric encoder disc) | no: outside the library |
 //! | `noise_sigma_rad` | Gaussian noise on every reported angle | the declared noise |
+//! | `trigger_latency_s` | each sample carries the joints of that much later than its time stamp: a touch captured at its trigger time while moving shows the arm past the contact | `trigger_latency` |
 //!
 //! The noise is a deterministic function of the sample's time, so `truth_at` reproduces exactly
 //! what was streamed.
@@ -46,6 +47,8 @@ pub(crate) struct Effects {
     cyclic_encoder: Option<CyclicEncoder>,
     #[serde(default)]
     noise_sigma_rad: Option<f64>,
+    #[serde(default)]
+    trigger_latency_s: Option<f64>,
 }
 
 fn finite(values: &[f64]) -> bool {
@@ -109,7 +112,17 @@ impl Effects {
         {
             return Err("effects: noise_sigma_rad must be within 0-0.01".to_owned());
         }
+        if let Some(latency) = effects.trigger_latency_s
+            && !(latency.is_finite() && (0.0..=0.5).contains(&latency))
+        {
+            return Err("effects: trigger_latency_s must be within 0-0.5 s".to_owned());
+        }
         Ok(effects)
+    }
+
+    /// How much later than its time stamp a sample's joints are, s.
+    pub(crate) fn latency_s(&self) -> f64 {
+        self.trigger_latency_s.unwrap_or(0.0)
     }
 
     /// What the encoders report for the true angles `q_true` at controller time `time_s`.

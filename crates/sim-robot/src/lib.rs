@@ -193,9 +193,10 @@ impl Shared {
             .clone();
         let true_q = motion.position(time_s);
         // The controller only knows its encoders: it reports, and computes its TCP from, the
-        // angles they read.
-        let q = effects.reported(&self.chain, &true_q, time_s);
-        let qd = motion.velocity(time_s);
+        // angles they read, taken `latency` after the time stamp it puts on them.
+        let latency_s = effects.latency_s();
+        let q = effects.reported(&self.chain, &motion.position(time_s + latency_s), time_s);
+        let qd = motion.velocity(time_s + latency_s);
         let (base_from_tool, jacobian): (Isometry3<f64>, _) = self.chain.jacobian_unchecked(&q);
         let t = base_from_tool.translation.vector;
         let r = base_from_tool.rotation.scaled_axis();
@@ -208,7 +209,7 @@ impl Shared {
             true_q,
             q,
             qd,
-            qdd: motion.acceleration(time_s),
+            qdd: motion.acceleration(time_s + latency_s),
             tcp_pose: [t.x, t.y, t.z, r.x, r.y, r.z],
             tcp_speed: [speed[0], speed[1], speed[2], speed[3], speed[4], speed[5]],
             tool_accelerometer: [up_in_tool.x, up_in_tool.y, up_in_tool.z],

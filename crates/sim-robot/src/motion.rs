@@ -25,6 +25,25 @@ pub enum Motion {
 pub struct Waypoint {
     pub time_s: f64,
     pub q: Vec<f64>,
+    /// The segment that ends here runs at constant joint speed instead of the start-stop blend
+    /// (a probe passing through contact on the fly).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub linear: bool,
+}
+
+/// Position, velocity and acceleration fractions of a segment at phase `s`: the start-stop blend
+/// (1 - cos(pi s)) / 2, or constant speed for a linear segment.
+fn profile(linear: bool, s: f64, duration_s: f64) -> (f64, f64, f64) {
+    use std::f64::consts::PI;
+    if linear {
+        return (s, 1.0 / duration_s, 0.0);
+    }
+    let rate = PI / duration_s;
+    (
+        (1.0 - (PI * s).cos()) / 2.0,
+        (PI * s).sin() * rate / 2.0,
+        (PI * s).cos() * rate * rate / 2.0,
+    )
 }
 
 /// Where `t_s` falls on a path: the segment's ends and the phase s in [0, 1].
@@ -72,7 +91,7 @@ impl Motion {
             }
             Motion::Path { waypoints } => match segment(waypoints, t_s) {
                 Some((a, b, s)) => {
-                    let blend = (1.0 - (std::f64::consts::PI * s).cos()) / 2.0;
+                    let (blend, _, _) = profile(b.linear, s, b.time_s - a.time_s);
                     a.q.iter()
                         .zip(&b.q)
                         .map(|(qa, qb)| qa + (qb - qa) * blend)
@@ -105,8 +124,7 @@ impl Motion {
             }
             Motion::Path { waypoints } => match segment(waypoints, t_s) {
                 Some((a, b, s)) => {
-                    let rate = std::f64::consts::PI / (b.time_s - a.time_s);
-                    let blend_rate = (std::f64::consts::PI * s).sin() * rate / 2.0;
+                    let (_, blend_rate, _) = profile(b.linear, s, b.time_s - a.time_s);
                     a.q.iter()
                         .zip(&b.q)
                         .map(|(qa, qb)| (qb - qa) * blend_rate)
@@ -134,8 +152,7 @@ impl Motion {
             }
             Motion::Path { waypoints } => match segment(waypoints, t_s) {
                 Some((a, b, s)) => {
-                    let rate = std::f64::consts::PI / (b.time_s - a.time_s);
-                    let blend_acceleration = (std::f64::consts::PI * s).cos() * rate * rate / 2.0;
+                    let (_, _, blend_acceleration) = profile(b.linear, s, b.time_s - a.time_s);
                     a.q.iter()
                         .zip(&b.q)
                         .map(|(qa, qb)| (qb - qa) * blend_acceleration)

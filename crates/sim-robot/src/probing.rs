@@ -50,6 +50,11 @@ pub(crate) struct ProbeRequest {
     /// Vary the probe tilt from touch to touch (see `PlanOptions::vary_tilt`).
     #[serde(default)]
     vary_tilt: bool,
+    /// Touch on the fly instead of dwelling: pass through each contact at these speeds (m/s,
+    /// used in turn, each at most 5 mm/s) along the probe axis. The contact's time is the
+    /// trigger's time stamp a touch-trigger probe would give.
+    #[serde(default)]
+    on_the_fly_speeds_m_s: Option<Vec<f64>>,
 }
 
 fn one() -> f64 {
@@ -65,11 +70,45 @@ fn default_dwell() -> f64 {
     0.5
 }
 
-/// When each touch is in contact, controller time, s.
+/// How far before and past the contact an on-the-fly touch moves at constant speed, m.
+const PASS_THROUGH_M: f64 = 0.001;
+
+/// One touch's time in contact, controller time, s: dwelling from `from_s` to `until_s`, or
+/// passing through between them on the fly; `at_s` is when the ball is exactly on the surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Contact {
+    pub(crate) from_s: f64,
+    pub(crate) until_s: f64,
+    pub(crate) at_s: f64,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Schedule {
-    pub(crate) contacts: Vec<(f64, f64)>,
+    pub(crate) contacts: Vec<Contact>,
     pub(crate) end_s: f64,
+}
+
+/// Joints `PASS_THROUGH_M` before and past the contact along the probe axis.
+fn through_contact(
+    shared: &Shared,
+    touch: &align_core::trials::planning::TouchPlan,
+    flange_from_tcp: &nalgebra::Isometry3<f64>,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let contact = shared.chain.forward_unchecked(&touch.q_contact) * flange_from_tcp;
+    let probe_axis = contact.rotation * nalgebra::Vector3::z();
+    let solve = |shift_m: f64| {
+        let target = nalgebra::Translation3::from(probe_axis * shift_m) * contact;
+        shared
+            .chain
+            .inverse(
+                &(target * flange_from_tcp.inverse()),
+                &touch.q_contact,
+                &align_core::kinematics::IkOptions::default(),
+            )
+            .map(|solution| solution.q)
+            .map_err(|error| format!("probe: cannot pass through a contact: {error}"))
+    };
+    Ok((solve(-PASS_THROUGH_M)?, solve(PASS_THROUGH_M)?))
 }
 
 impl Schedule {
@@ -78,7 +117,7 @@ impl Schedule {
         let active = self
             .contacts
             .iter()
-            .position(|(from, until)| (*from..*until).contains(&time_s));
+            .position(|contact| (contact.from_s..contact.until_s).contains(&time_s));
         json!({
             "touches": self.contacts.len(),
             "active_touch": active,
@@ -113,6 +152,14 @@ pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
     }
     if request.mesh_scale <= 0.0 || request.part_scale <= 0.0 || request.tip_radius < 0.0 {
         return Err("probe: mesh_scale and part_scale must be > 0, tip_radius >= 0".to_owned());
+    }
+    if let Some(speeds) = &request.on_the_fly_speeds_m_s
+        && (speeds.is_empty()
+            || speeds
+                .iter()
+                .any(|v| !(v.is_finite() && *v > 0.0 && *v <= 0.005)))
+    {
+        return Err("probe: on_the_fly_speeds_m_s needs speeds within (0, 0.005] m/s".to_owned());
     }
     if !(0.0..=2.0).contains(&request.dwell_s) {
         return Err(format!(
@@ -150,17 +197,19 @@ pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
     let mut waypoints = vec![Waypoint {
         time_s,
         q: shared.motion_at(time_s),
+        linear: false,
     }];
     let mut contacts = Vec::with_capacity(plan.len());
-    let mut push = |q: &[f64], duration_s: f64, waypoints: &mut Vec<Waypoint>| {
+    let mut push = |q: &[f64], duration_s: f64, linear: bool, waypoints: &mut Vec<Waypoint>| {
         time_s += duration_s;
         waypoints.push(Waypoint {
             time_s,
             q: q.to_vec(),
+            linear,
         });
         time_s
     };
-    for touch in &plan {
+    for (index, touch) in plan.iter().enumerate() {
         let from = &waypoints[waypoints.len() - 1].q;
         let largest_move = from
             .iter()
@@ -170,12 +219,40 @@ pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
         push(
             &touch.q_approach,
             (largest_move / TRAVEL_SPEED_RAD_S).max(SHORTEST_MOVE_S),
+            false,
             &mut waypoints,
         );
-        let in_contact = push(&touch.q_contact, CONTACT_MOVE_S, &mut waypoints);
-        let leaving = push(&touch.q_contact, request.dwell_s.max(0.01), &mut waypoints);
-        contacts.push((in_contact, leaving));
-        push(&touch.q_approach, CONTACT_MOVE_S, &mut waypoints);
+        match &request.on_the_fly_speeds_m_s {
+            None => {
+                let in_contact = push(&touch.q_contact, CONTACT_MOVE_S, false, &mut waypoints);
+                let leaving = push(
+                    &touch.q_contact,
+                    request.dwell_s.max(0.01),
+                    false,
+                    &mut waypoints,
+                );
+                contacts.push(Contact {
+                    from_s: in_contact,
+                    until_s: leaving,
+                    at_s: in_contact,
+                });
+                push(&touch.q_approach, CONTACT_MOVE_S, false, &mut waypoints);
+            }
+            Some(speeds) => {
+                let speed = speeds[index % speeds.len()];
+                let (before, after) = through_contact(shared, touch, &flange_from_tcp)?;
+                let crossing_s = PASS_THROUGH_M / speed;
+                let from_s = push(&before, CONTACT_MOVE_S, false, &mut waypoints);
+                let at_s = push(&touch.q_contact, crossing_s, true, &mut waypoints);
+                let until_s = push(&after, crossing_s, true, &mut waypoints);
+                contacts.push(Contact {
+                    from_s,
+                    until_s,
+                    at_s,
+                });
+                push(&touch.q_approach, CONTACT_MOVE_S, false, &mut waypoints);
+            }
+        }
     }
     let motion = Motion::Path { waypoints };
     motion.check(&shared.limits)?;
@@ -185,7 +262,7 @@ pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
         "ok": true,
         "touches": plan.len(),
         "end_s": end_s,
-        "contacts": contacts.iter().map(|(from, until)| json!({"from_s": from, "until_s": until})).collect::<Vec<_>>(),
+        "contacts": contacts.iter().map(|c| json!({"from_s": c.from_s, "until_s": c.until_s, "at_s": c.at_s})).collect::<Vec<_>>(),
         "tilts_rad": plan.iter().map(|t| t.tilt_rad).collect::<Vec<_>>(),
     });
     *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = Some(Schedule { contacts, end_s });
