@@ -225,6 +225,11 @@ fn backend_loop(
         match event {
             Event::Connecting => controller.state = "connecting",
             Event::Connected { .. } => {
+                // A new session straight after the old one (a controller restarted faster than
+                // the loss timeout) is a gap in the stream too.
+                if controller.state == "connected" {
+                    controller.reconnects += 1;
+                }
                 controller.state = "connected";
                 controller.reason = None;
                 // A new session counts from its own start.
