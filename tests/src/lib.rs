@@ -115,7 +115,14 @@ pub fn repo_root() -> PathBuf {
 pub fn ensure_binaries(packages: &[&str]) {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
     let mut command = Command::new(cargo);
-    command.arg("build").current_dir(repo_root());
+    // The profile these tests were built with, so that the build reuses their artifacts (a
+    // plain `cargo build` would compile every dependency again for the dev profile) and the
+    // binaries land next to the tests.
+    let release = binary("").components().any(|c| c.as_os_str() == "release");
+    let profile = if release { "release" } else { "test" };
+    command
+        .args(["build", "--profile", profile])
+        .current_dir(repo_root());
     for name in packages {
         command.args(["-p", name]);
     }

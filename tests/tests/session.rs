@@ -51,26 +51,7 @@ fn python_session(
 
 #[test]
 fn session_survives_sigkill_and_aligns_to_the_truth() {
-    for name in ["sim-robot", "robot-bridge", "ips"] {
-        if !binary(name).exists() {
-            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
-            let status = Command::new(cargo)
-                .args([
-                    "build",
-                    "-p",
-                    "sim-robot",
-                    "-p",
-                    "robot-bridge",
-                    "-p",
-                    "ips-client",
-                ])
-                .current_dir(root())
-                .status()
-                .unwrap();
-            assert!(status.success());
-            break;
-        }
-    }
+    system_tests::ensure_binaries(&["sim-robot", "robot-bridge", "ips-client"]);
     let status = Command::new("bash")
         .arg(root().join("scripts/python-env.sh"))
         .status()

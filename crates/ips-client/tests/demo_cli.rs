@@ -8,8 +8,21 @@ use std::process::Command;
 /// Always asks cargo (a no-op when they are current): an existing binary may be stale.
 fn ensure_services_built() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    // The tests' own profile: the build reuses their artifacts and puts the binaries next to
+    // `ips` (a plain `cargo build` would compile every dependency again for the dev profile).
+    let ips = std::path::PathBuf::from(env!("CARGO_BIN_EXE_ips"));
+    let release = ips.components().any(|c| c.as_os_str() == "release");
+    let profile = if release { "release" } else { "test" };
     let status = Command::new(cargo)
-        .args(["build", "-p", "sim-robot", "-p", "robot-bridge"])
+        .args([
+            "build",
+            "--profile",
+            profile,
+            "-p",
+            "sim-robot",
+            "-p",
+            "robot-bridge",
+        ])
         .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
         .status()
         .unwrap();
