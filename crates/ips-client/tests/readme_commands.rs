@@ -43,12 +43,36 @@ fn readme_has_exactly_two_setup_commands_and_ci_runs_the_test_command() {
     );
 }
 
+/// The services the demo starts sit next to `ips`: build them with the tests' own profile.
+fn ensure_services_built() {
+    let ips = PathBuf::from(env!("CARGO_BIN_EXE_ips"));
+    let release = ips.components().any(|c| c.as_os_str() == "release");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    let status = Command::new(cargo)
+        .args([
+            "build",
+            "--profile",
+            if release { "release" } else { "test" },
+        ])
+        .args(["-p", "sim-robot", "-p", "robot-bridge"])
+        .current_dir(repo_root())
+        .status()
+        .expect("cargo runs");
+    assert!(status.success());
+}
+
 #[test]
 fn readme_main_job_runs() {
     let main_job = &setup_commands()[0];
-    let (_, ips_args) = main_job
-        .split_once(" -- ")
-        .expect("the main job passes arguments to ips after --");
+    // "cargo build ... && target/release/ips ARGS": run ARGS with this build's ips.
+    let (build, ips_args) = main_job
+        .split_once("target/release/ips ")
+        .expect("the main job runs target/release/ips");
+    assert!(
+        build.starts_with("cargo build --release --locked --workspace &&"),
+        "the main job builds every binary the demo starts: {main_job}"
+    );
+    ensure_services_built();
     let output = Command::new(env!("CARGO_BIN_EXE_ips"))
         .args(ips_args.split_whitespace())
         .current_dir(repo_root())
@@ -59,5 +83,6 @@ fn readme_main_job_runs() {
         "README main job failed: {}",
         String::from_utf8_lossy(&output.stderr)
     );
-    assert!(String::from_utf8_lossy(&output.stdout).contains("base_from_part"));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("aligned pose error"), "{stdout}");
 }
