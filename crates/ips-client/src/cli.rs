@@ -49,8 +49,8 @@ pub enum Command {
     Start(ServiceArgs),
     /// Ask the service to stop mirroring.
     Stop(ServiceArgs),
-    /// Capture the robot's current pose as an inspection.
-    Get(ServiceArgs),
+    /// Capture the robot's current pose as an inspection (or its pose at a controller time).
+    Get(GetArgs),
     /// List the inspections taken.
     List(ServiceArgs),
     /// Remove inspections by id.
@@ -109,6 +109,16 @@ pub struct ServiceArgs {
 pub struct PathArgs {
     /// Session file, as the service sees the path.
     pub path: String,
+    #[command(flatten)]
+    pub service: ServiceArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct GetArgs {
+    /// The controller time of the touch, s (a touch-trigger probe's time stamp): the sample at
+    /// or just after it instead of the latest; the service keeps the last 4096 samples.
+    #[arg(long, value_name = "SECONDS")]
+    pub at: Option<f64>,
     #[command(flatten)]
     pub service: ServiceArgs,
 }

@@ -16,6 +16,23 @@ pub fn call(command: &str, ids: Vec<String>, args: &ServiceArgs) -> Result<Strin
     call_with_path(command, ids, None, args)
 }
 
+/// `get`, optionally at a controller time (s).
+pub fn get(time_s: Option<f64>, args: &ServiceArgs) -> Result<String, BadInput> {
+    if time_s.is_some_and(|t| !t.is_finite()) {
+        return Err(BadInput(
+            "--at must be a finite controller time in s".to_owned(),
+        ));
+    }
+    let mut request = protocol::service_request("get");
+    request.body.time_s = time_s;
+    let data = request_data(&args.service, &request)?;
+    Ok(if args.json {
+        format!("{}\n", serde_json::to_string(&data).unwrap_or_default())
+    } else {
+        text_of("get", &data)
+    })
+}
+
 /// As [`call`], with a session file path (save, load).
 pub fn call_with_path(
     command: &str,

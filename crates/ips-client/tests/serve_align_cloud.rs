@@ -229,6 +229,10 @@ fn ips_align_asks_the_service_to_align_its_inspections() {
     assert!(translation_m < 1e-6 && yaw_rad < 1e-6, "{asked}");
     let text = String::from_utf8(ips(&["align", "--service", &endpoint]).stdout).unwrap();
     assert!(text.starts_with("base_from_part: xyz [m] 0.62"), "{text}");
+    // A capture at a controller time needs joint states, which this robotless service lacks.
+    let at = ips(&["get", "--at", "12.5", "--service", &endpoint]);
+    assert_eq!(at.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&at.stderr).contains("no joint state received yet"));
     // The service aligns with its defaults: the thesis's switches are refused with --service.
     let refused = ips(&["align", "--service", &endpoint, "--local"]);
     assert_eq!(refused.status.code(), Some(2));

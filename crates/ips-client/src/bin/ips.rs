@@ -65,7 +65,7 @@ fn run(command: Command) -> Result<String, BadInput> {
         Command::Serve(args) => serve(&args),
         Command::Start(args) => ips_client::client::call("start", Vec::new(), &args),
         Command::Stop(args) => ips_client::client::call("stop", Vec::new(), &args),
-        Command::Get(args) => ips_client::client::call("get", Vec::new(), &args),
+        Command::Get(args) => ips_client::client::get(args.at, &args.service),
         Command::List(args) => ips_client::client::call("list", Vec::new(), &args),
         Command::Reset(args) => ips_client::client::call("reset", Vec::new(), &args),
         Command::Status(args) => ips_client::client::call("status", Vec::new(), &args),
