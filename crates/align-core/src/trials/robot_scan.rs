@@ -29,11 +29,11 @@ pub struct RobotScanOptions {
 }
 
 impl Default for RobotScanOptions {
-    /// A cell as the trials scan it: three scanners around and above the robot, 5 mm spacing,
+    /// A cell as the trials scan it: three scanners around and above the robot, 6 mm spacing,
     /// 0.3 mm noise, floor, a neighbour and 10% outliers.
     fn default() -> Self {
         Self {
-            spacing_m: 0.005,
+            spacing_m: 0.006,
             noise_sigma_m: 0.0003,
             outlier_fraction: 0.1,
             scanners: vec![
@@ -41,7 +41,7 @@ impl Default for RobotScanOptions {
                 Point3::new(-1.0, 1.8, 1.4),
                 Point3::new(-1.0, -1.8, 1.8),
             ],
-            floor_half_m: 0.5,
+            floor_half_m: 0.4,
             neighbour: true,
             hidden_links: Vec::new(),
             seed: 1,

@@ -293,6 +293,34 @@ impl ArticulatedBody {
         path
     }
 
+    /// A bound on how far any link surface gets from the root frame's origin, whatever the
+    /// joints (prismatic joints at their limits), m.
+    pub fn max_reach_m(&self) -> f64 {
+        let offsets: f64 = self
+            .joints
+            .iter()
+            .map(|joint| {
+                let travel = match joint.driver {
+                    Some((p, multiplier, offset)) if joint.prismatic => {
+                        let info = &self.parameters[p];
+                        (multiplier * info.lower + offset)
+                            .abs()
+                            .max((multiplier * info.upper + offset).abs())
+                    }
+                    _ => 0.0,
+                };
+                joint.parent_from_joint.translation.vector.norm() + travel.min(1e3)
+            })
+            .sum();
+        let largest_link = self
+            .links
+            .iter()
+            .filter_map(|link| link.surface.as_ref())
+            .map(|mesh| mesh.centroid().coords.norm() + mesh.radius_m())
+            .fold(0.0, f64::max);
+        offsets + largest_link
+    }
+
     /// The whole robot at `q` as one mesh in the root frame (for the rigid first alignment).
     pub fn rigid_mesh(&self, q: &[f64]) -> Option<Mesh> {
         let poses = self.link_poses(&Isometry3::identity(), q);

@@ -36,7 +36,8 @@ pub struct RobotFitOptions {
     pub min_observability: f64,
     pub search_passes: usize,
     pub max_iterations: usize,
-    /// The refinement stops when no point of the robot moves more than this in a step, m.
+    /// The refinement stops when a step moves the points along their normals by less than this
+    /// (RMS), m.
     pub tolerance_m: f64,
     pub parallel: bool,
     /// The rigid first alignment of the whole robot.
@@ -46,15 +47,20 @@ pub struct RobotFitOptions {
 impl Default for RobotFitOptions {
     fn default() -> Self {
         Self {
-            voxel_m: 0.005,
+            voxel_m: 0.006,
             band_min_m: 0.01,
             min_link_points: 12,
             min_observability: 0.05,
             search_passes: 2,
             max_iterations: 60,
-            tolerance_m: 1e-6,
+            tolerance_m: 1e-5,
             parallel: true,
-            base: PcaOptions::default(),
+            // 10 mm keypoints: the rigid stage only has to bring the base near, the joints
+            // are still wrong while it runs.
+            base: PcaOptions {
+                voxel_m: 0.01,
+                ..PcaOptions::default()
+            },
         }
     }
 }
@@ -77,6 +83,10 @@ pub enum RobotFitError {
     NonFiniteJoint { joint: String, value: f64 },
     #[error("the base pose is not finite")]
     NonFiniteBase,
+    #[error(
+        "no cloud point lies within {reach_m} m of the start base position: is the base pose right?"
+    )]
+    NothingInReach { reach_m: f64 },
     #[error("aligning the whole robot at the start joints failed: {0}")]
     Base(PcaError),
 }
@@ -177,28 +187,17 @@ impl<'a> Placed<'a> {
         best
     }
 
-    /// +1 for a point on the surface of `links`, -1 for one deep inside a link (a scanner cannot
-    /// see into a solid), 0 otherwise.
-    fn support(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> f64 {
-        let mut score = 0.0;
-        for &link in links {
+    /// Whether `point` lies within `band` of the surface of one of `links`.
+    fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
+        links.iter().any(|&link| {
             let Some(surface) = &self.body.links()[link].surface else {
-                continue;
+                return false;
             };
             let local = self.inverse[link] * point;
             let (lower, upper) = surface.bounds();
-            if !(0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band) {
-                continue;
-            }
-            let closest = surface.closest_point(&local);
-            if closest.signed_distance.abs() <= band {
-                return 1.0;
-            }
-            if closest.signed_distance < -band && surface.is_watertight() {
-                score = -1.0;
-            }
-        }
-        score
+            (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band)
+                && surface.closest_point_within(&local, band).is_some()
+        })
     }
 }
 
@@ -273,11 +272,22 @@ pub fn align_robot(
 ) -> Result<RobotFit, RobotFitError> {
     let started = Instant::now();
     check_inputs(body, cloud, world_from_root_start, q0, delta_m)?;
-    let keypoints = voxel_representatives(cloud, options.voxel_m);
-    let coarse = voxel_representatives(cloud, options.voxel_m * 3.0);
+    // Only points the robot can reach from where the start puts it take part.
+    let root = world_from_root_start * Point3::origin();
+    let reach = body.max_reach_m() + 2.0 * delta_m + options.band_min_m;
+    let near: Vec<Point3<f64>> = cloud
+        .iter()
+        .filter(|p| (*p - root).norm() <= reach)
+        .copied()
+        .collect();
+    if near.is_empty() {
+        return Err(RobotFitError::NothingInReach { reach_m: reach });
+    }
+    let keypoints = voxel_representatives(&near, options.voxel_m);
+    let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
     let mut world_from_root = match body.rigid_mesh(q0) {
         Some(mesh) => {
-            align_cloud(&mesh, cloud, world_from_root_start, delta_m, &options.base)
+            align_cloud(&mesh, &near, world_from_root_start, delta_m, &options.base)
                 .map_err(RobotFitError::Base)?
                 .base_from_part
         }
@@ -285,7 +295,8 @@ pub fn align_robot(
     };
     let mut q = q0.to_vec();
     let mut iterations = 0;
-    for _ in 0..options.search_passes.max(1) {
+    let passes = options.search_passes.max(1);
+    for pass in 0..passes {
         for parameter in search_order(body) {
             search_joint(
                 body,
@@ -297,14 +308,21 @@ pub fn align_robot(
                 options,
             );
         }
+        // Coarse keypoints while joints may still jump; every keypoint for the last pass.
+        let last = pass + 1 == passes;
+        let points = if last { &keypoints } else { &coarse };
+        let pass_options = RobotFitOptions {
+            max_iterations: if last { options.max_iterations } else { 15 },
+            ..options.clone()
+        };
         let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
         iterations += refine(
             body,
-            &keypoints,
+            points,
             &mut world_from_root,
             &mut q,
             band0,
-            options,
+            &pass_options,
         );
     }
     let placed = Placed::new(body, &world_from_root, &q);
@@ -433,7 +451,9 @@ fn search_joint(
     let current = q[parameter];
     let mut centre = current;
     let mut half = half_window;
-    for steps in [24usize, 8] {
+    // Coarse steps move the farthest point by about a coarse voxel or more, at most 24 of them.
+    let coarse_steps = ((2.0 * sweep / (3.0 * options.voxel_m)).ceil() as usize).clamp(4, 24);
+    for steps in [coarse_steps, 8] {
         let step = 2.0 * half / steps as f64;
         let move_m = if info.prismatic { step } else { step * reach };
         let band = move_m.max(3.0 * options.voxel_m);
@@ -446,10 +466,10 @@ fn search_joint(
             let placed = Placed::new(body, world_from_root, &trial);
             nearby
                 .iter()
-                .map(|p| placed.support(p, band, &moved))
-                .sum::<f64>()
+                .filter(|p| placed.supports(p, band, &moved))
+                .count()
         };
-        let scores: Vec<f64> = if options.parallel {
+        let scores: Vec<usize> = if options.parallel {
             candidates.par_iter().map(|&v| score(v)).collect()
         } else {
             candidates.iter().map(|&v| score(v)).collect()
@@ -459,7 +479,7 @@ fn search_joint(
             .iter()
             .zip(&scores)
             .max_by(|a, b| {
-                a.1.total_cmp(b.1)
+                a.1.cmp(b.1)
                     .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
             })
             .map_or(current, |(&v, _)| v);
@@ -495,9 +515,14 @@ fn refine(
         }
         let scale = placed_radius(&placed);
         let (normal, rhs) = normal_equations(body, &placed, &matches, scale);
-        let Some(step) = solve_damped(normal, rhs) else {
+        let Some(step) = solve_damped(normal.clone(), rhs) else {
             break;
         };
+        // How far the step moves the points along their normals (RMS): motions no point
+        // constrains (a symmetric link's spin) do not count.
+        let total_weight: f64 = matches.iter().map(|m| m.weight).sum();
+        let normal_motion = step.dot(&(&normal * &step)).max(0.0) / total_weight;
+        let normal_motion_m = normal_motion.sqrt();
         let omega = Vector3::new(step[0], step[1], step[2]) / scale;
         let translation = Vector3::new(step[3], step[4], step[5]);
         let centre = world_from_root.translation.vector;
@@ -505,16 +530,13 @@ fn refine(
         let shift = centre + translation - rotation * centre;
         *world_from_root =
             Isometry3::from_parts(Translation3::from(shift), rotation) * *world_from_root;
-        let mut largest_move = translation.norm() + omega.norm() * scale;
         for (parameter, value) in q.iter_mut().enumerate() {
             let info = &body.parameters()[parameter];
             let change = step[6 + parameter] / if info.prismatic { 1.0 } else { scale };
             *value = (*value + change).clamp(info.lower, info.upper);
-            largest_move =
-                largest_move.max(change.abs() * if info.prismatic { 1.0 } else { scale });
         }
         debug_assert_eq!(step.len(), n);
-        still = if largest_move < options.tolerance_m {
+        still = if normal_motion_m < options.tolerance_m {
             still + 1
         } else {
             0
