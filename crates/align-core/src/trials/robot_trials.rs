@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
 
 use super::robot_scan::{RobotScanOptions, scan_robot};
 use super::{SUCCESS_THRESHOLD_M, TrialRng, random_displacement};
@@ -64,9 +64,10 @@ fn reach_from(
         .fold(0.0, f64::max)
 }
 
-/// A start for the hierarchical fit: the base displaced by the thesis's generator (radius: the
-/// robot's reach from its root) and every joint moved by up to delta / (its links' reach), so
-/// that each joint alone moves its farthest point by up to delta.
+/// A start for the hierarchical fit: the robot displaced by the thesis's generator about its
+/// centroid (radius: the robot's), as the thesis displaced its whole model, and every joint
+/// moved by up to delta / (its links' reach), so that each joint alone moves its farthest
+/// point by up to delta.
 pub fn perturb_robot(
     body: &ArticulatedBody,
     world_from_root: &Isometry3<f64>,
@@ -75,10 +76,20 @@ pub fn perturb_robot(
     rng: &mut TrialRng,
 ) -> (Isometry3<f64>, Vec<f64>) {
     let poses = body.link_poses(world_from_root, q);
-    let all: Vec<usize> = (0..body.links().len()).collect();
     let root = world_from_root * Point3::origin();
-    let radius = reach_from(body, &poses, &all, &root).max(0.05);
-    let base = world_from_root * random_displacement(rng, delta_m, radius);
+    let displacement = random_displacement(rng, delta_m, 1.0);
+    let base = match body.rigid_mesh(q) {
+        Some(mesh) => {
+            let scaled = Isometry3::from_parts(
+                displacement.translation,
+                UnitQuaternion::from_scaled_axis(
+                    displacement.rotation.scaled_axis() / mesh.radius_m(),
+                ),
+            );
+            super::displace_about_centroid(world_from_root, &mesh, &scaled)
+        }
+        None => world_from_root * displacement,
+    };
     let mut start = q.to_vec();
     for (parameter, value) in start.iter_mut().enumerate() {
         let info = &body.parameters()[parameter];

@@ -323,11 +323,29 @@ impl ArticulatedBody {
 
     /// The whole robot at `q` as one mesh in the root frame (for the rigid first alignment).
     pub fn rigid_mesh(&self, q: &[f64]) -> Option<Mesh> {
+        self.rigid_mesh_of(q, &(0..self.links.len()).collect::<Vec<_>>())
+    }
+
+    /// The links no joint moves (the base and what is bolted to it), as one mesh in the root
+    /// frame.
+    pub fn fixed_mesh(&self, q: &[f64]) -> Option<Mesh> {
+        let fixed: Vec<usize> = (0..self.links.len())
+            .filter(|&link| self.movers[link].is_empty())
+            .collect();
+        self.rigid_mesh_of(q, &fixed)
+    }
+
+    fn rigid_mesh_of(&self, q: &[f64], links: &[usize]) -> Option<Mesh> {
         let poses = self.link_poses(&Isometry3::identity(), q);
         let mut soup = TriangleSoup::default();
-        for (link, pose) in self.links.iter().zip(&poses) {
-            if let Some(surface) = &link.surface {
-                append(&mut soup, surface.vertices(), surface.triangles(), pose);
+        for &link in links {
+            if let Some(surface) = &self.links[link].surface {
+                append(
+                    &mut soup,
+                    surface.vertices(),
+                    surface.triangles(),
+                    &poses[link],
+                );
             }
         }
         Mesh::new(&soup.vertices, &soup.triangles).ok()
