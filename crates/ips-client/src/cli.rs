@@ -42,6 +42,13 @@ pub enum Command {
         after_help = "Examples:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json\n  ips align-cloud --service tcp://127.0.0.1:4000 --cloud /data/scan.xyz --cloud-scale 0.001\n      (asks the running service: its session part from the nominal pose, delta 0.1 m;\n      paths as the service sees them)"
     )]
     AlignCloud(crate::align_cloud::AlignCloudArgs),
+    /// Hierarchical alignment of a robot in a scanner cloud: its base pose and joint values,
+    /// each link constrained by its parent (URDF with link geometry).
+    #[command(
+        name = "align-robot",
+        after_help = "Example:\n  ips align-robot --urdf robots/ur10.urdf --cloud scan.xyz \\\n      --base-pose 0,0,0,0,0,0 --q0 0,-1.57,1.57,-1.57,-1.57,0 --delta 0.1 --json"
+    )]
+    AlignRobot(crate::align_robot::AlignRobotArgs),
     /// The alignment service: mirrors the robot through robot-bridge, captures inspections,
     /// journals them, aligns on request (REP socket, thesis envelope).
     Serve(ServeArgs),
@@ -173,6 +180,14 @@ pub struct TrialsArgs {
     /// box, 10% outliers, 0.3 mm noise).
     #[arg(long)]
     pub pca: bool,
+    /// Robot trials instead: a shipped robot (ur10, ur10e, iiwa14) in a cluttered scan, the
+    /// whole robot and each link aligned independently (thesis PCA) and hierarchically.
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["pca", "touches"])]
+    pub robot: Option<String>,
+    /// With --robot: only the hierarchical alignment (the independent one takes most of the
+    /// time).
+    #[arg(long, requires = "robot")]
+    pub hierarchical_only: bool,
     /// Print one JSON document instead of Markdown tables.
     #[arg(long)]
     pub json: bool,

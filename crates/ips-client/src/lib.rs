@@ -4,11 +4,13 @@
 
 pub mod align;
 pub mod align_cloud;
+pub mod align_robot;
 pub mod cli;
 pub mod client;
 pub mod demo;
 pub mod diagnose;
 pub mod fk;
+pub mod robot_trials;
 pub mod serve;
 pub mod session;
 pub mod trials;

@@ -9,7 +9,7 @@
 
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as GlamVector;
-use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -246,6 +246,18 @@ impl Mesh {
                 triangle: 0,
                 on_face: false,
             })
+    }
+
+    /// Distance along the ray from `origin` in the unit direction `direction` to the first
+    /// surface it meets within `max_distance_m` (scanner line-of-sight tests).
+    pub fn ray_hit_m(
+        &self,
+        origin: &Point3<f64>,
+        direction: &Vector3<f64>,
+        max_distance_m: f64,
+    ) -> Option<f64> {
+        let ray = Ray::new(to_glam(origin), to_glam(&Point3::from(*direction)));
+        self.trimesh.cast_local_ray(&ray, max_distance_m, false)
     }
 
     /// Like [`Mesh::closest_point`], but `None` when no surface point lies within `max_distance_m`

@@ -1,9 +1,116 @@
-//! Simple solids built in code: prisms extruded from a planar outline. Tests and the shipped test
-//! parts use them; real parts come from CAD files.
+//! Simple solids built in code: prisms extruded from a planar outline (tests and the shipped test
+//! parts), and the URDF primitives (box, cylinder, sphere, capsule) as closed, outward-oriented
+//! triangle soups that a robot link's surface is assembled from.
 
 use nalgebra::Point3;
 
 use super::mesh::{Mesh, MeshError};
+use crate::io::TriangleSoup;
+
+/// Segments around a tessellated circle: the facets deviate from the true circle by
+/// r (1 - cos(pi / n)), 0.06 mm for a 50 mm radius, well under a scanner's noise.
+pub const CIRCLE_SEGMENTS: usize = 64;
+
+/// A URDF box: centred on the origin, edges `size_m` along x, y, z.
+pub fn box_soup(size_m: [f64; 3]) -> TriangleSoup {
+    let [hx, hy, hz] = size_m.map(|s| s / 2.0);
+    let vertices = (0..8)
+        .map(|i| {
+            Point3::new(
+                if i & 1 == 0 { -hx } else { hx },
+                if i & 2 == 0 { -hy } else { hy },
+                if i & 4 == 0 { -hz } else { hz },
+            )
+        })
+        .collect();
+    let triangles = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    TriangleSoup {
+        vertices,
+        triangles,
+    }
+}
+
+/// A solid of revolution about z: `profile` lists (radius, z) from the bottom pole to the top
+/// pole (radius 0 at both ends), swept in `segments` steps.
+fn revolve(profile: &[(f64, f64)], segments: usize) -> TriangleSoup {
+    let rings = profile.len();
+    let mut vertices = vec![Point3::new(0.0, 0.0, profile[0].1)];
+    for &(radius, z) in &profile[1..rings - 1] {
+        for k in 0..segments {
+            let angle = k as f64 / segments as f64 * std::f64::consts::TAU;
+            vertices.push(Point3::new(radius * angle.cos(), radius * angle.sin(), z));
+        }
+    }
+    let top = vertices.len() as u32;
+    vertices.push(Point3::new(0.0, 0.0, profile[rings - 1].1));
+    let ring = |r: usize, k: usize| (1 + (r - 1) * segments + k % segments) as u32;
+    let mut triangles = Vec::new();
+    for k in 0..segments {
+        triangles.push([0, ring(1, k + 1), ring(1, k)]);
+        for r in 1..rings - 2 {
+            let (a, b, c, d) = (
+                ring(r, k),
+                ring(r, k + 1),
+                ring(r + 1, k),
+                ring(r + 1, k + 1),
+            );
+            triangles.push([a, b, d]);
+            triangles.push([a, d, c]);
+        }
+        triangles.push([ring(rings - 2, k), ring(rings - 2, k + 1), top]);
+    }
+    TriangleSoup {
+        vertices,
+        triangles,
+    }
+}
+
+/// A URDF cylinder: axis z, centred on the origin.
+pub fn cylinder_soup(radius_m: f64, length_m: f64) -> TriangleSoup {
+    let h = length_m / 2.0;
+    revolve(
+        &[(0.0, -h), (radius_m, -h), (radius_m, h), (0.0, h)],
+        CIRCLE_SEGMENTS,
+    )
+}
+
+/// A URDF capsule: a cylinder of `length_m` along z with hemispherical caps.
+pub fn capsule_soup(radius_m: f64, length_m: f64) -> TriangleSoup {
+    let h = length_m / 2.0;
+    let steps = CIRCLE_SEGMENTS / 4;
+    let mut profile = Vec::new();
+    for i in 0..=steps {
+        let angle =
+            -std::f64::consts::FRAC_PI_2 + i as f64 / steps as f64 * std::f64::consts::FRAC_PI_2;
+        profile.push((radius_m * angle.cos(), -h + radius_m * angle.sin()));
+    }
+    for i in 0..=steps {
+        let angle = i as f64 / steps as f64 * std::f64::consts::FRAC_PI_2;
+        profile.push((radius_m * angle.cos(), h + radius_m * angle.sin()));
+    }
+    profile[0].0 = 0.0;
+    let last = profile.len() - 1;
+    profile[last].0 = 0.0;
+    revolve(&profile, CIRCLE_SEGMENTS)
+}
+
+/// A URDF sphere centred on the origin.
+pub fn sphere_soup(radius_m: f64) -> TriangleSoup {
+    capsule_soup(radius_m, 0.0)
+}
 
 /// A prism: the simple polygon `outline` (counter-clockwise, in the xy-plane, m) extruded from
 /// z = 0 to z = `height_m`, as a closed outward-oriented mesh.

@@ -11,6 +11,8 @@ pub mod clouds;
 pub mod parts;
 pub mod planning;
 pub mod probing;
+pub mod robot_scan;
+pub mod robot_trials;
 
 use std::time::Instant;
 

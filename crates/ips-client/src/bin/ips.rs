@@ -62,6 +62,14 @@ fn run(command: Command) -> Result<String, BadInput> {
                 output.to_text()
             })
         }
+        Command::AlignRobot(args) => {
+            let output = ips_client::align_robot::run(&args)?;
+            Ok(if args.json {
+                json_line(&output)?
+            } else {
+                output.to_text()
+            })
+        }
         Command::Serve(args) => serve(&args),
         Command::Start(args) => ips_client::client::call("start", Vec::new(), &args),
         Command::Stop(args) => ips_client::client::call("stop", Vec::new(), &args),
@@ -98,6 +106,15 @@ fn run(command: Command) -> Result<String, BadInput> {
                 json_line(&output)?
             } else {
                 output.to_text()
+            })
+        }
+        Command::Trials(args) if args.robot.is_some() => {
+            let robot = args.robot.as_deref().unwrap_or_default();
+            let output = ips_client::robot_trials::run(&args, robot, |line| eprintln!("{line}"))?;
+            Ok(if args.json {
+                json_line(&output)?
+            } else {
+                output.to_markdown()
             })
         }
         Command::Trials(args) => {

@@ -1,0 +1,68 @@
+//! Hierarchical alignment of a whole robot (UR10, iiwa14) in a cluttered 20k-point scan from a
+//! start 100 mm off.
+//! Run: cargo bench -p align-core --bench articulated
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use align_core::robots::ShippedRobot;
+use align_core::trials::TrialRng;
+use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
+use align_core::trials::robot_trials::perturb_robot;
+use criterion::{Criterion, criterion_group, criterion_main};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+/// The scan spacing that gives about `target` points, found by scaling with the point density.
+fn scan_of_about(
+    body: &ArticulatedBody,
+    truth: &Isometry3<f64>,
+    q: &[f64],
+    target: usize,
+) -> Vec<nalgebra::Point3<f64>> {
+    let mut options = RobotScanOptions::default();
+    for _ in 0..4 {
+        let cloud = scan_robot(body, truth, q, &options);
+        let ratio = cloud.len() as f64 / target as f64;
+        if (ratio - 1.0).abs() < 0.03 {
+            return cloud;
+        }
+        options.spacing_m *= ratio.sqrt();
+    }
+    scan_robot(body, truth, q, &options)
+}
+
+fn articulated(c: &mut Criterion) {
+    let truth = Isometry3::from_parts(
+        Translation3::new(0.2, -0.1, 0.0),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
+    );
+    let mut group = c.benchmark_group("align_robot");
+    group
+        .sample_size(20)
+        .measurement_time(Duration::from_secs(20));
+    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+        let body = ArticulatedBody::from_model(&robot.model().expect("shipped")).expect("surfaces");
+        let cloud = scan_of_about(&body, &truth, &robot.home(), 20_000);
+        let mut rng = TrialRng::new(9);
+        let (start, q0) = perturb_robot(&body, &truth, &robot.home(), 0.1, &mut rng);
+        let options = RobotFitOptions::default();
+        let probe = align_robot(&body, &cloud, &start, &q0, 0.1, &options).expect("aligns");
+        println!(
+            "{}: {} cloud points, rms {:.3} mm, {} iterations",
+            robot.name(),
+            cloud.len(),
+            probe.rms_m * 1e3,
+            probe.iterations
+        );
+        group.bench_function(format!("{}_20k_points_delta_100mm", robot.name()), |b| {
+            b.iter(|| {
+                black_box(align_robot(&body, &cloud, &start, &q0, 0.1, &options).expect("aligns"))
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, articulated);
+criterion_main!(benches);

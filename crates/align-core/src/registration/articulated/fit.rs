@@ -1,0 +1,685 @@
+//! Hierarchical alignment of a robot in a scan (thesis 3.5, proposed there, built here): the base
+//! pose and the joint values, each link constrained by its parent.
+//!
+//! 1. The base: the whole robot at the start joints, aligned as one rigid part with Point Cloud
+//!    Alignment (its filters, weights, schedule and exploration).
+//! 2. Down the tree: each joint's value by a 1-D search (coarse grid, then fine) scored by how
+//!    many scan points the links it moves explain, with everything above it fixed. A link is only
+//!    ever placed where its parent allows, which is what the independent alignment lacked.
+//! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
+//!    cos-weighted points within a band that shrinks to `band_min_m`, each point assigned to
+//!    its nearest link surface. Steps 2 and 3 repeat (`search_passes`), so a joint searched with
+//!    its children still at the start is searched again once they are close.
+//!
+//! Nothing is invented: a joint whose links hold too few points, or whose motion the points do
+//! not constrain (a cylinder turning about its own axis), keeps its start value and is reported.
+
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
+
+use super::body::ArticulatedBody;
+use crate::registration::pca::{PcaError, PcaOptions, align_cloud};
+use crate::registration::sampling::voxel_representatives;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotFitOptions {
+    /// Voxel edge of the keypoints, m.
+    pub voxel_m: f64,
+    /// The band the refinement ends with: points farther from every link are not used, m.
+    pub band_min_m: f64,
+    /// A link with fewer points than this is reported as not visible.
+    pub min_link_points: usize,
+    /// A joint whose motion moves its points along their normals by less than this fraction of
+    /// its reach per radian (RMS) is not constrained by the scan.
+    pub min_observability: f64,
+    pub search_passes: usize,
+    pub max_iterations: usize,
+    /// The refinement stops when a step moves the points along their normals by less than this
+    /// (RMS), m.
+    pub tolerance_m: f64,
+    pub parallel: bool,
+    /// The rigid first alignment of the whole robot.
+    pub base: PcaOptions,
+}
+
+impl Default for RobotFitOptions {
+    fn default() -> Self {
+        Self {
+            voxel_m: 0.006,
+            band_min_m: 0.01,
+            min_link_points: 12,
+            min_observability: 0.05,
+            search_passes: 2,
+            max_iterations: 60,
+            tolerance_m: 1e-5,
+            parallel: true,
+            // 10 mm keypoints: the rigid stage only has to bring the base near, the joints
+            // are still wrong while it runs.
+            base: PcaOptions {
+                voxel_m: 0.01,
+                ..PcaOptions::default()
+            },
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RobotFitError {
+    #[error("the cloud is empty")]
+    EmptyCloud,
+    #[error("cloud point {0} is not finite")]
+    NonFinitePoint(usize),
+    #[error("delta must be finite and > 0, got {0}")]
+    BadDelta(f64),
+    #[error("the robot has {expected} joints ({names}), {got} start values were given")]
+    JointCount {
+        expected: usize,
+        got: usize,
+        names: String,
+    },
+    #[error("start value {value} of joint '{joint}' is not finite")]
+    NonFiniteJoint { joint: String, value: f64 },
+    #[error("the base pose is not finite")]
+    NonFiniteBase,
+    #[error(
+        "no cloud point lies within {reach_m} m of the start base position: is the base pose right?"
+    )]
+    NothingInReach { reach_m: f64 },
+    #[error("aligning the whole robot at the start joints failed: {0}")]
+    Base(PcaError),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkFit {
+    pub name: String,
+    /// Scan points assigned to the link in the final band.
+    pub points: usize,
+    pub rms_m: f64,
+    /// False for links without geometry and links with fewer than `min_link_points` points.
+    pub visible: bool,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointFit {
+    pub name: String,
+    pub value: f64,
+    /// False when the scan did not constrain the joint: its value is the start value.
+    pub observed: bool,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotFit {
+    pub world_from_root: Isometry3<f64>,
+    pub q: Vec<f64>,
+    pub links: Vec<LinkFit>,
+    pub joints: Vec<JointFit>,
+    pub iterations: usize,
+    pub rms_m: f64,
+    pub time_s: f64,
+}
+
+/// A keypoint matched to a link surface.
+#[derive(Debug, Clone, Copy)]
+struct Match {
+    point: Point3<f64>,
+    surface: Point3<f64>,
+    normal: Vector3<f64>,
+    distance: f64,
+    weight: f64,
+    link: usize,
+}
+
+/// Link surfaces placed in the world, with their bounds, ready for point queries.
+struct Placed<'a> {
+    body: &'a ArticulatedBody,
+    poses: Vec<Isometry3<f64>>,
+    inverse: Vec<Isometry3<f64>>,
+}
+
+impl<'a> Placed<'a> {
+    fn new(body: &'a ArticulatedBody, world_from_root: &Isometry3<f64>, q: &[f64]) -> Self {
+        let poses = body.link_poses(world_from_root, q);
+        let inverse = poses.iter().map(|p| p.inverse()).collect();
+        Self {
+            body,
+            poses,
+            inverse,
+        }
+    }
+
+    /// The nearest surface of `links` within `band` of `point`.
+    fn nearest(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> Option<Match> {
+        let mut best: Option<Match> = None;
+        for &link in links {
+            let Some(surface) = &self.body.links()[link].surface else {
+                continue;
+            };
+            let local = self.inverse[link] * point;
+            let (lower, upper) = surface.bounds();
+            let inside_box =
+                (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band);
+            if !inside_box {
+                continue;
+            }
+            let limit = best.map_or(band, |b| b.distance);
+            let Some(closest) = surface.closest_point_within(&local, limit) else {
+                continue;
+            };
+            let distance = closest.signed_distance.abs();
+            // A point whose nearest feature is an edge, more than a millimetre away, lies beyond
+            // the link (floor or a fixture meeting it) and would drag the edge towards it.
+            if !closest.on_face && distance > EDGE_REJECTION_M {
+                continue;
+            }
+            if best.is_none_or(|b| distance < b.distance) {
+                best = Some(Match {
+                    point: *point,
+                    surface: self.poses[link] * closest.point,
+                    normal: self.poses[link].rotation * closest.normal,
+                    distance,
+                    weight: (distance / band * std::f64::consts::FRAC_PI_2).cos(),
+                    link,
+                });
+            }
+        }
+        best
+    }
+
+    /// Whether `point` lies within `band` of the surface of one of `links`.
+    fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
+        links.iter().any(|&link| {
+            let Some(surface) = &self.body.links()[link].surface else {
+                return false;
+            };
+            let local = self.inverse[link] * point;
+            let (lower, upper) = surface.bounds();
+            (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band)
+                && surface.closest_point_within(&local, band).is_some()
+        })
+    }
+}
+
+const EDGE_REJECTION_M: f64 = 1e-3;
+
+fn check_inputs(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q0: &[f64],
+    delta_m: f64,
+) -> Result<(), RobotFitError> {
+    if cloud.is_empty() {
+        return Err(RobotFitError::EmptyCloud);
+    }
+    if let Some(index) = cloud
+        .iter()
+        .position(|p| !p.coords.iter().all(|c| c.is_finite()))
+    {
+        return Err(RobotFitError::NonFinitePoint(index));
+    }
+    if !(delta_m.is_finite() && delta_m > 0.0) {
+        return Err(RobotFitError::BadDelta(delta_m));
+    }
+    let parameters = body.parameters();
+    if q0.len() != parameters.len() {
+        return Err(RobotFitError::JointCount {
+            expected: parameters.len(),
+            got: q0.len(),
+            names: parameters
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    if let Some((value, parameter)) = q0
+        .iter()
+        .zip(parameters)
+        .find(|(value, _)| !value.is_finite())
+    {
+        return Err(RobotFitError::NonFiniteJoint {
+            joint: parameter.name.clone(),
+            value: *value,
+        });
+    }
+    let finite_base = world_from_root
+        .translation
+        .vector
+        .iter()
+        .all(|c| c.is_finite())
+        && world_from_root
+            .rotation
+            .coords
+            .iter()
+            .all(|c| c.is_finite());
+    if !finite_base {
+        return Err(RobotFitError::NonFiniteBase);
+    }
+    Ok(())
+}
+
+/// Fits `body` to `cloud` (world frame) from the start base pose and joint values; `delta_m`
+/// bounds how far any point of the robot is from where the start puts it.
+pub fn align_robot(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root_start: &Isometry3<f64>,
+    q0: &[f64],
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> Result<RobotFit, RobotFitError> {
+    let started = Instant::now();
+    check_inputs(body, cloud, world_from_root_start, q0, delta_m)?;
+    // Only points the robot can reach from where the start puts it take part.
+    let root = world_from_root_start * Point3::origin();
+    let reach = body.max_reach_m() + 2.0 * delta_m + options.band_min_m;
+    let near: Vec<Point3<f64>> = cloud
+        .iter()
+        .filter(|p| (*p - root).norm() <= reach)
+        .copied()
+        .collect();
+    if near.is_empty() {
+        return Err(RobotFitError::NothingInReach { reach_m: reach });
+    }
+    let keypoints = voxel_representatives(&near, options.voxel_m);
+    let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
+    let mut world_from_root = match body.rigid_mesh(q0) {
+        Some(mesh) => {
+            align_cloud(&mesh, &near, world_from_root_start, delta_m, &options.base)
+                .map_err(RobotFitError::Base)?
+                .base_from_part
+        }
+        None => *world_from_root_start,
+    };
+    let mut q = q0.to_vec();
+    let mut iterations = 0;
+    let passes = options.search_passes.max(1);
+    for pass in 0..passes {
+        for parameter in search_order(body) {
+            search_joint(
+                body,
+                &coarse,
+                &world_from_root,
+                &mut q,
+                parameter,
+                delta_m,
+                options,
+            );
+        }
+        // Coarse keypoints while joints may still jump; every keypoint for the last pass.
+        let last = pass + 1 == passes;
+        let points = if last { &keypoints } else { &coarse };
+        let pass_options = RobotFitOptions {
+            max_iterations: if last { options.max_iterations } else { 15 },
+            ..options.clone()
+        };
+        let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+        iterations += refine(
+            body,
+            points,
+            &mut world_from_root,
+            &mut q,
+            band0,
+            &pass_options,
+        );
+    }
+    let placed = Placed::new(body, &world_from_root, &q);
+    let all: Vec<usize> = (0..body.links().len()).collect();
+    let matches = correspond(
+        &placed,
+        &keypoints,
+        options.band_min_m,
+        &all,
+        options.parallel,
+    );
+    let links = link_fits(body, &matches, options.min_link_points);
+    let observed = observed_parameters(body, &placed, &matches, &links, options);
+    for (parameter, seen) in observed.iter().enumerate() {
+        if !seen {
+            q[parameter] = q0[parameter];
+        }
+    }
+    let joints = body
+        .parameters()
+        .iter()
+        .zip(&q)
+        .zip(&observed)
+        .map(|((parameter, &value), &observed)| JointFit {
+            name: parameter.name.clone(),
+            value,
+            observed,
+        })
+        .collect();
+    let sum: f64 = matches.iter().map(|m| m.distance * m.distance).sum();
+    Ok(RobotFit {
+        world_from_root,
+        q,
+        links,
+        joints,
+        iterations,
+        rms_m: (sum / matches.len().max(1) as f64).sqrt(),
+        time_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Parameters from the root outwards (the order their links appear in the tree).
+fn search_order(body: &ArticulatedBody) -> Vec<usize> {
+    let mut order = Vec::new();
+    for &link in body.order() {
+        for &parameter in body.movers(link) {
+            if !order.contains(&parameter) {
+                order.push(parameter);
+            }
+        }
+    }
+    order
+}
+
+fn correspond(
+    placed: &Placed,
+    keypoints: &[Point3<f64>],
+    band: f64,
+    links: &[usize],
+    parallel: bool,
+) -> Vec<Match> {
+    let one = |p: &Point3<f64>| placed.nearest(p, band, links).filter(|m| m.weight > 0.0);
+    if parallel {
+        keypoints.par_iter().filter_map(one).collect()
+    } else {
+        keypoints.iter().filter_map(one).collect()
+    }
+}
+
+/// Largest distance of the surfaces of `links` from `origin`, m.
+fn reach_m(placed: &Placed, links: &[usize], origin: &Point3<f64>) -> f64 {
+    links
+        .iter()
+        .filter_map(|&link| {
+            let surface = placed.body.links()[link].surface.as_ref()?;
+            let centre = placed.poses[link] * surface.centroid();
+            Some((centre - origin).norm() + surface.radius_m())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Sets `q[parameter]` to the value whose links are best supported by the scan, searching a
+/// window that `delta_m` allows around the current value (coarse grid, then a finer one).
+fn search_joint(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &mut [f64],
+    parameter: usize,
+    delta_m: f64,
+    options: &RobotFitOptions,
+) {
+    let moved = body.moved_by(parameter);
+    let placed = Placed::new(body, world_from_root, q);
+    let axes = body.axes(&placed.poses);
+    let Some((axis, _, _)) = axes
+        .iter()
+        .flatten()
+        .find(|(_, p, _)| *p == parameter)
+        .copied()
+    else {
+        return;
+    };
+    let reach = reach_m(&placed, &moved, &axis.origin).max(options.voxel_m);
+    let info = &body.parameters()[parameter];
+    // The joint moves its farthest point by reach * dq: a window twice delta at that point
+    // leaves room for the base's own error.
+    let half_window = if info.prismatic {
+        2.0 * delta_m
+    } else {
+        (2.0 * delta_m / reach).min(std::f64::consts::PI)
+    };
+    let sweep = if info.prismatic {
+        half_window
+    } else {
+        half_window * reach
+    };
+    let nearby: Vec<Point3<f64>> = keypoints
+        .iter()
+        .filter(|p| (*p - axis.origin).norm() <= reach + sweep + 3.0 * options.voxel_m)
+        .copied()
+        .collect();
+    if nearby.is_empty() {
+        return;
+    }
+    let current = q[parameter];
+    let mut centre = current;
+    let mut half = half_window;
+    // Coarse steps move the farthest point by about a coarse voxel or more, at most 24 of them.
+    let coarse_steps = ((2.0 * sweep / (3.0 * options.voxel_m)).ceil() as usize).clamp(4, 24);
+    for steps in [coarse_steps, 8] {
+        let step = 2.0 * half / steps as f64;
+        let move_m = if info.prismatic { step } else { step * reach };
+        let band = move_m.max(3.0 * options.voxel_m);
+        let candidates: Vec<f64> = (0..=steps)
+            .map(|i| (centre - half + i as f64 * step).clamp(info.lower, info.upper))
+            .collect();
+        let score = |value: f64| {
+            let mut trial = q.to_vec();
+            trial[parameter] = value;
+            let placed = Placed::new(body, world_from_root, &trial);
+            nearby
+                .iter()
+                .filter(|p| placed.supports(p, band, &moved))
+                .count()
+        };
+        let scores: Vec<usize> = if options.parallel {
+            candidates.par_iter().map(|&v| score(v)).collect()
+        } else {
+            candidates.iter().map(|&v| score(v)).collect()
+        };
+        // Ties (a symmetric link) go to the value nearest the current one: never invent motion.
+        let best = candidates
+            .iter()
+            .zip(&scores)
+            .max_by(|a, b| {
+                a.1.cmp(b.1)
+                    .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
+            })
+            .map_or(current, |(&v, _)| v);
+        centre = best;
+        half = step;
+    }
+    q[parameter] = centre;
+}
+
+/// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.
+fn refine(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &mut Isometry3<f64>,
+    q: &mut [f64],
+    band0: f64,
+    options: &RobotFitOptions,
+) -> usize {
+    let all: Vec<usize> = (0..body.links().len()).collect();
+    let n = 6 + q.len();
+    let shrink_iterations = 10;
+    let mut iterations = 0;
+    let mut still = 0;
+    while iterations < options.max_iterations {
+        let fraction = (iterations as f64 / shrink_iterations as f64).min(1.0);
+        let band = options.band_min_m
+            + (band0 - options.band_min_m) * (fraction * std::f64::consts::FRAC_PI_2).cos();
+        iterations += 1;
+        let placed = Placed::new(body, world_from_root, q);
+        let matches = correspond(&placed, keypoints, band, &all, options.parallel);
+        if matches.len() < 6 {
+            break;
+        }
+        let scale = placed_radius(&placed);
+        let (normal, rhs) = normal_equations(body, &placed, &matches, scale);
+        let Some(step) = solve_damped(normal.clone(), rhs) else {
+            break;
+        };
+        // How far the step moves the points along their normals (RMS): motions no point
+        // constrains (a symmetric link's spin) do not count.
+        let total_weight: f64 = matches.iter().map(|m| m.weight).sum();
+        let normal_motion = step.dot(&(&normal * &step)).max(0.0) / total_weight;
+        let normal_motion_m = normal_motion.sqrt();
+        let omega = Vector3::new(step[0], step[1], step[2]) / scale;
+        let translation = Vector3::new(step[3], step[4], step[5]);
+        let centre = world_from_root.translation.vector;
+        let rotation = UnitQuaternion::from_scaled_axis(omega);
+        let shift = centre + translation - rotation * centre;
+        *world_from_root =
+            Isometry3::from_parts(Translation3::from(shift), rotation) * *world_from_root;
+        for (parameter, value) in q.iter_mut().enumerate() {
+            let info = &body.parameters()[parameter];
+            let change = step[6 + parameter] / if info.prismatic { 1.0 } else { scale };
+            *value = (*value + change).clamp(info.lower, info.upper);
+        }
+        debug_assert_eq!(step.len(), n);
+        still = if normal_motion_m < options.tolerance_m {
+            still + 1
+        } else {
+            0
+        };
+        if fraction >= 1.0 && still >= 2 {
+            break;
+        }
+    }
+    iterations
+}
+
+fn placed_radius(placed: &Placed) -> f64 {
+    let root = placed.poses[placed.body.root()] * Point3::origin();
+    reach_m(
+        placed,
+        &(0..placed.body.links().len()).collect::<Vec<_>>(),
+        &root,
+    )
+    .max(0.01)
+}
+
+/// J^T W J and J^T W r of the point-to-plane residuals; rotations (base and revolute joints)
+/// are scaled by `scale` (m) so that every column is in metres.
+fn normal_equations(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    matches: &[Match],
+    scale: f64,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let n = 6 + body.parameters().len();
+    let axes = body.axes(&placed.poses);
+    let centre = placed.poses[body.root()].translation.vector;
+    let joints_above: Vec<Vec<usize>> = (0..body.links().len())
+        .map(|link| body.joints_above(link))
+        .collect();
+    let mut normal = DMatrix::zeros(n, n);
+    let mut rhs = DVector::zeros(n);
+    let mut row = DVector::zeros(n);
+    for m in matches {
+        row.fill(0.0);
+        let lever = (m.surface.coords - centre).cross(&m.normal) / scale;
+        for axis in 0..3 {
+            row[axis] = lever[axis];
+            row[3 + axis] = m.normal[axis];
+        }
+        for &joint in &joints_above[m.link] {
+            if let Some((frame, parameter, multiplier)) = axes[joint] {
+                row[6 + parameter] += multiplier
+                    * if frame.prismatic {
+                        frame.axis.dot(&m.normal)
+                    } else {
+                        frame.axis.dot(&(m.surface - frame.origin).cross(&m.normal)) / scale
+                    };
+            }
+        }
+        let residual = m.normal.dot(&(m.point - m.surface));
+        normal.syger(m.weight, &row, &row, 1.0);
+        rhs.axpy(residual * m.weight, &row, 1.0);
+    }
+    (normal, rhs)
+}
+
+/// Solves the normal equations with a little damping, so that a direction no point constrains
+/// (a symmetric link's spin, a link nobody sees) stays where it is instead of blowing up.
+fn solve_damped(mut normal: DMatrix<f64>, rhs: DVector<f64>) -> Option<DVector<f64>> {
+    let largest = (0..normal.nrows())
+        .map(|i| normal[(i, i)])
+        .fold(0.0, f64::max);
+    for i in 0..normal.nrows() {
+        normal[(i, i)] += largest * 1e-6 + 1e-12;
+    }
+    Some(normal.cholesky()?.solve(&rhs))
+}
+
+fn link_fits(body: &ArticulatedBody, matches: &[Match], min_points: usize) -> Vec<LinkFit> {
+    let mut counts = vec![(0usize, 0.0f64); body.links().len()];
+    for m in matches {
+        counts[m.link].0 += 1;
+        counts[m.link].1 += m.distance * m.distance;
+    }
+    body.links()
+        .iter()
+        .zip(counts)
+        .map(|(link, (points, sum))| LinkFit {
+            name: link.name.clone(),
+            points,
+            rms_m: if points > 0 {
+                (sum / points as f64).sqrt()
+            } else {
+                0.0
+            },
+            visible: link.surface.is_some() && points >= min_points,
+        })
+        .collect()
+}
+
+/// A parameter is observed when its links hold points and turning it moves those points along
+/// their normals (RMS over the points, per radian, relative to the links' reach).
+fn observed_parameters(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    matches: &[Match],
+    links: &[LinkFit],
+    options: &RobotFitOptions,
+) -> Vec<bool> {
+    let axes = body.axes(&placed.poses);
+    (0..body.parameters().len())
+        .map(|parameter| {
+            let moved = body.moved_by(parameter);
+            if !moved.iter().any(|&l| links[l].visible) {
+                return false;
+            }
+            let mut sum = 0.0;
+            let mut count = 0usize;
+            let mut reach: f64 = 0.0;
+            for m in matches
+                .iter()
+                .filter(|m| moved.contains(&m.link) && links[m.link].visible)
+            {
+                let mut motion = 0.0;
+                for joint in body.joints_above(m.link) {
+                    if let Some((frame, p, multiplier)) = axes[joint]
+                        && p == parameter
+                    {
+                        motion += multiplier
+                            * if frame.prismatic {
+                                frame.axis.dot(&m.normal)
+                            } else {
+                                let arm = m.surface - frame.origin;
+                                reach = reach.max(frame.axis.cross(&arm).norm());
+                                frame.axis.dot(&arm.cross(&m.normal))
+                            };
+                    }
+                }
+                sum += motion * motion;
+                count += 1;
+            }
+            let rms = (sum / count.max(1) as f64).sqrt();
+            if body.parameters()[parameter].prismatic {
+                rms >= options.min_observability
+            } else {
+                rms >= options.min_observability * reach.max(options.voxel_m)
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,259 @@
+//! The thesis's PCA trials (3.4) on a robot: the whole robot and each link, aligned
+//! independently (each link as a rigid part, as the thesis did) and hierarchically (base pose
+//! and joints, children constrained by parents).
+//!
+//! Errors are surface deviations: the largest distance between a link's surface where the
+//! alignment puts it and where it truly is (both ways). Unlike a pose distance this is zero for
+//! a cylinder turned about its own axis, which no scan can tell apart.
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
+
+use super::robot_scan::{RobotScanOptions, scan_robot};
+use super::{SUCCESS_THRESHOLD_M, TrialRng, random_displacement};
+use crate::geometry::Mesh;
+use crate::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use crate::registration::pca::{PcaOptions, align_cloud};
+
+/// Points on a mesh (vertices, edge midpoints and triangle centroids), in its frame.
+fn surface_samples(mesh: &Mesh) -> Vec<Point3<f64>> {
+    let vertices: Vec<Point3<f64>> = mesh.vertices().collect();
+    let mut samples = vertices.clone();
+    for triangle in mesh.triangles() {
+        let [a, b, c] = triangle.map(|i| vertices[i as usize]);
+        samples.push(Point3::from((a.coords + b.coords + c.coords) / 3.0));
+        samples.push(Point3::from((a.coords + b.coords) / 2.0));
+    }
+    samples
+}
+
+/// Largest distance between the surface at `estimated` and at `truth` (both world_from_mesh).
+pub fn surface_deviation_m(mesh: &Mesh, estimated: &Isometry3<f64>, truth: &Isometry3<f64>) -> f64 {
+    let truth_from_estimated = truth.inverse() * estimated;
+    let estimated_from_truth = truth_from_estimated.inverse();
+    surface_samples(mesh)
+        .iter()
+        .map(|s| {
+            let there = mesh
+                .closest_point(&(truth_from_estimated * s))
+                .signed_distance
+                .abs();
+            let back = mesh
+                .closest_point(&(estimated_from_truth * s))
+                .signed_distance
+                .abs();
+            there.max(back)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Largest distance of the robot's surfaces from `origin`, m.
+fn reach_from(
+    body: &ArticulatedBody,
+    poses: &[Isometry3<f64>],
+    links: &[usize],
+    origin: &Point3<f64>,
+) -> f64 {
+    links
+        .iter()
+        .filter_map(|&l| {
+            let mesh = body.links()[l].surface.as_ref()?;
+            Some((poses[l] * mesh.centroid() - origin).norm() + mesh.radius_m())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// A start for the hierarchical fit: the robot displaced by the thesis's generator about its
+/// centroid (radius: the robot's), as the thesis displaced its whole model, and every joint
+/// moved by up to delta / (its links' reach), so that each joint alone moves its farthest
+/// point by up to delta.
+pub fn perturb_robot(
+    body: &ArticulatedBody,
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    delta_m: f64,
+    rng: &mut TrialRng,
+) -> (Isometry3<f64>, Vec<f64>) {
+    let poses = body.link_poses(world_from_root, q);
+    let root = world_from_root * Point3::origin();
+    let displacement = random_displacement(rng, delta_m, 1.0);
+    let base = match body.rigid_mesh(q) {
+        Some(mesh) => {
+            let scaled = Isometry3::from_parts(
+                displacement.translation,
+                UnitQuaternion::from_scaled_axis(
+                    displacement.rotation.scaled_axis() / mesh.radius_m(),
+                ),
+            );
+            super::displace_about_centroid(world_from_root, &mesh, &scaled)
+        }
+        None => world_from_root * displacement,
+    };
+    let mut start = q.to_vec();
+    for (parameter, value) in start.iter_mut().enumerate() {
+        let info = &body.parameters()[parameter];
+        let moved = body.moved_by(parameter);
+        let origin = moved.first().map_or(root, |&l| poses[l] * Point3::origin());
+        let bound = if info.prismatic {
+            delta_m
+        } else {
+            (delta_m / reach_from(body, &poses, &moved, &origin).max(0.05))
+                .min(std::f64::consts::PI)
+        };
+        *value = (*value + (2.0 * rng.uniform() - 1.0) * bound).clamp(info.lower, info.upper);
+    }
+    (base, start)
+}
+
+/// Outcome of one alignment of one object (the robot or a link).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Outcome {
+    pub error_m: f64,
+    pub time_s: f64,
+}
+
+/// Succeed / fail / mean error / mean time over trials.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Tally {
+    pub succeeded: usize,
+    pub failed: usize,
+    pub mean_error_m: f64,
+    pub mean_time_s: f64,
+}
+
+impl Tally {
+    pub fn from_outcomes(outcomes: &[Outcome]) -> Self {
+        let n = outcomes.len().max(1) as f64;
+        let succeeded = outcomes
+            .iter()
+            .filter(|o| o.error_m < SUCCESS_THRESHOLD_M)
+            .count();
+        Self {
+            succeeded,
+            failed: outcomes.len() - succeeded,
+            mean_error_m: outcomes.iter().map(|o| o.error_m).sum::<f64>() / n,
+            mean_time_s: outcomes.iter().map(|o| o.time_s).sum::<f64>() / n,
+        }
+    }
+}
+
+/// One row of the table: an object (the robot, or a link) at one delta, both methods.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotTrialRow {
+    pub object: String,
+    pub delta_m: f64,
+    pub independent: Option<Tally>,
+    pub hierarchical: Tally,
+}
+
+/// The scene the trials scan: the robot's root at `world_from_root`, joints at `q`.
+#[derive(Debug, Clone)]
+pub struct RobotScene {
+    pub world_from_root: Isometry3<f64>,
+    pub q: Vec<f64>,
+    pub scan: RobotScanOptions,
+}
+
+/// A failed alignment counts with this error (it returned no pose).
+const FAILED_ERROR_M: f64 = f64::INFINITY;
+
+fn finite_or_delta(error_m: f64, delta_m: f64) -> f64 {
+    if error_m.is_finite() {
+        error_m
+    } else {
+        delta_m
+    }
+}
+
+/// Runs `trials` seeded trials per delta: the hierarchical fit of the robot from a perturbed
+/// start, and (with `independent`) the rigid alignment of the whole robot and of each link from
+/// the thesis's displacement. Links are those with geometry.
+pub fn run_robot_trials(
+    body: &ArticulatedBody,
+    scene: &RobotScene,
+    deltas_m: &[f64],
+    trials: usize,
+    seed: u64,
+    independent: bool,
+    mut on_trial: impl FnMut(f64, usize),
+) -> Vec<RobotTrialRow> {
+    let cloud = scan_robot(body, &scene.world_from_root, &scene.q, &scene.scan);
+    let poses = body.link_poses(&scene.world_from_root, &scene.q);
+    let links: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.links()[l].surface.is_some())
+        .collect();
+    let whole = body.rigid_mesh(&scene.q);
+    let fit_options = RobotFitOptions::default();
+    let pca_options = PcaOptions::default();
+    let mut rows = Vec::new();
+    for &delta_m in deltas_m {
+        let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
+        // Outcomes per object: index 0 the whole robot, then one per link.
+        let mut hierarchical = vec![Vec::new(); links.len() + 1];
+        let mut rigid = vec![Vec::new(); links.len() + 1];
+        for trial in 0..trials {
+            on_trial(delta_m, trial);
+            let (base, q0) =
+                perturb_robot(body, &scene.world_from_root, &scene.q, delta_m, &mut rng);
+            let started = Instant::now();
+            let fit = align_robot(body, &cloud, &base, &q0, delta_m, &fit_options);
+            let time_s = started.elapsed().as_secs_f64();
+            let fitted = fit
+                .as_ref()
+                .ok()
+                .map(|f| body.link_poses(&f.world_from_root, &f.q));
+            let mut worst: f64 = 0.0;
+            for (slot, &link) in links.iter().enumerate() {
+                let error_m = fitted.as_ref().map_or(FAILED_ERROR_M, |fitted| {
+                    surface_deviation_m(
+                        body.links()[link].surface.as_ref().expect("has surface"),
+                        &fitted[link],
+                        &poses[link],
+                    )
+                });
+                worst = worst.max(error_m);
+                hierarchical[slot + 1].push(Outcome {
+                    error_m: finite_or_delta(error_m, delta_m),
+                    time_s,
+                });
+            }
+            hierarchical[0].push(Outcome {
+                error_m: finite_or_delta(worst, delta_m),
+                time_s,
+            });
+            if !independent {
+                continue;
+            }
+            let rigid_trial = |mesh: &Mesh, truth: &Isometry3<f64>, rng: &mut TrialRng| {
+                let displacement = random_displacement(rng, delta_m, mesh.radius_m());
+                let start = super::displace_about_centroid(truth, mesh, &displacement);
+                let started = Instant::now();
+                let result = align_cloud(mesh, &cloud, &start, delta_m, &pca_options);
+                let time_s = started.elapsed().as_secs_f64();
+                let error_m = result.map_or(delta_m, |r| {
+                    surface_deviation_m(mesh, &r.base_from_part, truth)
+                });
+                Outcome { error_m, time_s }
+            };
+            if let Some(mesh) = &whole {
+                rigid[0].push(rigid_trial(mesh, &scene.world_from_root, &mut rng));
+            }
+            for (slot, &link) in links.iter().enumerate() {
+                let mesh = body.links()[link].surface.as_ref().expect("has surface");
+                rigid[slot + 1].push(rigid_trial(mesh, &poses[link], &mut rng));
+            }
+        }
+        let names = std::iter::once(body.robot.clone())
+            .chain(links.iter().map(|&l| body.links()[l].name.clone()));
+        for (slot, object) in names.enumerate() {
+            rows.push(RobotTrialRow {
+                object,
+                delta_m,
+                independent: independent.then(|| Tally::from_outcomes(&rigid[slot])),
+                hierarchical: Tally::from_outcomes(&hierarchical[slot]),
+            });
+        }
+    }
+    rows
+}

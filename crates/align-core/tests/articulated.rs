@@ -1,0 +1,171 @@
+//! Hierarchical alignment of the shipped robots in scanner-like clouds.
+
+use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use align_core::robots::ShippedRobot;
+use align_core::trials::TrialRng;
+use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
+use align_core::trials::robot_trials::{perturb_robot, surface_deviation_m};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+fn cell_pose() -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(0.2, -0.1, 0.0),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
+    )
+}
+
+/// Fits from a perturbed start and returns the largest surface deviation over the visible links.
+fn recover(
+    robot: ShippedRobot,
+    q_true: &[f64],
+    scan: &RobotScanOptions,
+    delta_m: f64,
+    seed: u64,
+) -> (f64, Vec<String>) {
+    let body = ArticulatedBody::from_model(&robot.model().expect("shipped URDF loads"))
+        .expect("shipped robot has surfaces");
+    let truth = cell_pose();
+    let cloud = scan_robot(&body, &truth, q_true, scan);
+    let mut rng = TrialRng::new(seed);
+    let (base, q0) = perturb_robot(&body, &truth, q_true, delta_m, &mut rng);
+    let fit = align_robot(
+        &body,
+        &cloud,
+        &base,
+        &q0,
+        delta_m,
+        &RobotFitOptions::default(),
+    )
+    .expect("the fit runs");
+    let fitted = body.link_poses(&fit.world_from_root, &fit.q);
+    let true_poses = body.link_poses(&truth, q_true);
+    let mut worst: f64 = 0.0;
+    let mut report = Vec::new();
+    for (index, link) in body.links().iter().enumerate() {
+        let Some(mesh) = &link.surface else { continue };
+        let error = surface_deviation_m(mesh, &fitted[index], &true_poses[index]);
+        report.push(format!(
+            "{} {:.3} mm ({} pts)",
+            link.name,
+            error * 1e3,
+            fit.links[index].points
+        ));
+        if fit.links[index].visible {
+            worst = worst.max(error);
+        }
+    }
+    eprintln!(
+        "{} seed {seed} delta {delta_m}: {:.3} s, {report:?}, joints {:?}",
+        robot.name(),
+        fit.time_s,
+        fit.joints
+    );
+    (worst, report)
+}
+
+#[test]
+fn ur10_recovers_from_a_small_perturbation_in_a_cluttered_scan() {
+    let (worst, report) = recover(
+        ShippedRobot::Ur10,
+        &ShippedRobot::Ur10.home(),
+        &RobotScanOptions::default(),
+        0.05,
+        3,
+    );
+    assert!(worst < 1e-3, "{report:?}");
+}
+
+/// Joint values drawn around the robot's home (within 0.6 rad, inside the limits).
+fn random_configuration(robot: ShippedRobot, rng: &mut TrialRng) -> Vec<f64> {
+    robot
+        .home()
+        .iter()
+        .map(|q| q + (2.0 * rng.uniform() - 1.0) * 0.6)
+        .collect()
+}
+
+#[test]
+fn random_configurations_of_both_robots_recover_every_visible_link_to_a_millimetre() {
+    let mut rng = TrialRng::new(11);
+    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+        for case in 0..3u64 {
+            let q_true = random_configuration(robot, &mut rng);
+            let scan = RobotScanOptions {
+                seed: 100 + case,
+                ..RobotScanOptions::default()
+            };
+            let delta_m = [0.05, 0.1, 0.2][case as usize];
+            let (worst, report) = recover(robot, &q_true, &scan, delta_m, case);
+            assert!(worst < 1e-3, "{} case {case}: {report:?}", robot.name());
+        }
+    }
+}
+
+#[test]
+fn a_link_no_scanner_sees_is_reported_and_its_joint_kept_at_the_start() {
+    let robot = ShippedRobot::Iiwa14;
+    let body = ArticulatedBody::from_model(&robot.model().expect("shipped URDF loads"))
+        .expect("shipped robot has surfaces");
+    let hidden = "iiwa_link_7";
+    let scan = RobotScanOptions {
+        hidden_links: vec![hidden.to_owned()],
+        ..RobotScanOptions::default()
+    };
+    let truth = cell_pose();
+    let q_true = robot.home();
+    let cloud = scan_robot(&body, &truth, &q_true, &scan);
+    let mut rng = TrialRng::new(5);
+    let (base, q0) = perturb_robot(&body, &truth, &q_true, 0.05, &mut rng);
+    let fit = align_robot(&body, &cloud, &base, &q0, 0.05, &RobotFitOptions::default())
+        .expect("the fit runs");
+    let link = fit
+        .links
+        .iter()
+        .find(|link| link.name == hidden)
+        .expect("the link is reported");
+    assert!(!link.visible, "{link:?}");
+    let last = fit.joints.last().expect("iiwa has joints");
+    assert!(!last.observed);
+    assert_eq!(last.value, q0[q0.len() - 1]);
+    // The links that are seen are still found.
+    let fitted = body.link_poses(&fit.world_from_root, &fit.q);
+    let true_poses = body.link_poses(&truth, &q_true);
+    for (index, link) in body.links().iter().enumerate() {
+        if let (Some(mesh), true) = (&link.surface, fit.links[index].visible) {
+            let error = surface_deviation_m(mesh, &fitted[index], &true_poses[index]);
+            assert!(error < 1e-3, "{}: {error}", link.name);
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_refused_with_the_reason() {
+    let body =
+        ArticulatedBody::from_model(&ShippedRobot::Ur10.model().expect("loads")).expect("surfaces");
+    let cloud = scan_robot(
+        &body,
+        &cell_pose(),
+        &ShippedRobot::Ur10.home(),
+        &RobotScanOptions::default(),
+    );
+    let options = RobotFitOptions::default();
+    let short = align_robot(&body, &cloud, &cell_pose(), &[0.0; 5], 0.05, &options)
+        .expect_err("five values for six joints");
+    assert!(short.to_string().contains("6 joints"), "{short}");
+    assert!(short.to_string().contains("wrist_3_joint"), "{short}");
+    let mut q = ShippedRobot::Ur10.home();
+    q[2] = f64::NAN;
+    let nan = align_robot(&body, &cloud, &cell_pose(), &q, 0.05, &options).expect_err("NaN");
+    assert!(nan.to_string().contains("elbow_joint"), "{nan}");
+    let far = Isometry3::translation(50.0, 0.0, 0.0);
+    let nothing = align_robot(
+        &body,
+        &cloud,
+        &far,
+        &ShippedRobot::Ur10.home(),
+        0.05,
+        &options,
+    )
+    .expect_err("no points near the start");
+    assert!(nothing.to_string().contains("base pose"), "{nothing}");
+}

@@ -1,0 +1,182 @@
+//! `ips align-robot`: hierarchical alignment of a robot (URDF with link geometry) in a scanner
+//! cloud: the base pose and the joint values, each link constrained by its parent.
+
+use std::path::PathBuf;
+
+use align_core::io::read_cloud;
+use align_core::kinematics::{PackageMap, RobotModel};
+use align_core::pose::{isometry_from_xyz_rpy, xyz_rpy};
+use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use clap::Args;
+use serde::Serialize;
+
+use crate::{BadInput, parse_number_list};
+
+#[derive(Debug, Args)]
+pub struct AlignRobotArgs {
+    /// Robot description (URDF with visual or collision geometry; expand xacro files first).
+    #[arg(long, value_name = "FILE")]
+    pub urdf: PathBuf,
+    /// Where a ROS package named in package:// mesh URIs lives; repeatable.
+    #[arg(long = "package-dir", value_name = "NAME=DIR")]
+    pub package_dirs: Vec<String>,
+    /// Scanner cloud (.ply, .pcd, .xyz, .csv, .txt).
+    #[arg(long, value_name = "FILE")]
+    pub cloud: PathBuf,
+    /// Unit of the cloud file in metres (0.001 for mm).
+    #[arg(long, default_value_t = 1.0)]
+    pub cloud_scale: f64,
+    /// Nominal pose of the URDF's root link in the cloud's frame: x,y,z (m), roll,pitch,yaw (rad).
+    #[arg(long, value_name = "X,Y,Z,R,P,Y", allow_hyphen_values = true)]
+    pub base_pose: String,
+    /// Start joint values, one per moving joint that mimics none, in the URDF's order (rad or m).
+    #[arg(long, value_name = "A,B,...", allow_hyphen_values = true)]
+    pub q0: String,
+    /// Upper bound of how far any point of the robot is from where the start puts it, m.
+    #[arg(long, allow_hyphen_values = true)]
+    pub delta: f64,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct BasePoseJson {
+    pub xyz: [f64; 3],
+    pub rpy: [f64; 3],
+}
+
+#[derive(Debug, Serialize)]
+pub struct LinkJson {
+    pub name: String,
+    pub points: usize,
+    pub rms: f64,
+    pub visible: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct JointJson {
+    pub name: String,
+    pub value: f64,
+    /// False: the scan did not constrain the joint (its links unseen, or a symmetric link
+    /// turning about its own axis); the value is the start value.
+    pub observed: bool,
+}
+
+/// DESIGN.md 6.4 keys, plus `joints`, `rms`, `iterations`, `cloud_points`.
+#[derive(Debug, Serialize)]
+pub struct AlignRobotOutput {
+    pub base_pose: BasePoseJson,
+    pub q: Vec<f64>,
+    pub links: Vec<LinkJson>,
+    pub joints: Vec<JointJson>,
+    pub rms: f64,
+    pub iterations: usize,
+    pub cloud_points: usize,
+    pub time_s: f64,
+}
+
+pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {
+    let mut packages = PackageMap::new();
+    for entry in &args.package_dirs {
+        let (name, dir) = PackageMap::parse_entry(entry).map_err(BadInput)?;
+        packages.insert(name, dir);
+    }
+    let pose = parse_number_list(&args.base_pose, "--base-pose")?;
+    let [x, y, z, roll, pitch, yaw] = pose[..] else {
+        return Err(BadInput(format!(
+            "--base-pose needs 6 values x,y,z,roll,pitch,yaw, got {}",
+            pose.len()
+        )));
+    };
+    let q0 = parse_number_list(&args.q0, "--q0")?;
+    if !(args.delta.is_finite() && args.delta > 0.0) {
+        return Err(BadInput(format!(
+            "--delta must be a positive distance in m, got {}",
+            args.delta
+        )));
+    }
+    let model = RobotModel::from_urdf_file(&args.urdf, &packages).map_err(BadInput::new)?;
+    let body = ArticulatedBody::from_model(&model)
+        .map_err(|error| BadInput(format!("'{}': {error}", args.urdf.display())))?;
+    let cloud = read_cloud(&args.cloud, args.cloud_scale).map_err(BadInput::new)?;
+    let start = isometry_from_xyz_rpy([x, y, z], [roll, pitch, yaw]);
+    let fit = align_robot(
+        &body,
+        &cloud,
+        &start,
+        &q0,
+        args.delta,
+        &RobotFitOptions::default(),
+    )
+    .map_err(|error| BadInput(format!("cannot align the robot: {error}")))?;
+    let (xyz, rpy) = xyz_rpy(&fit.world_from_root);
+    Ok(AlignRobotOutput {
+        base_pose: BasePoseJson { xyz, rpy },
+        q: fit.q.clone(),
+        links: body
+            .links()
+            .iter()
+            .zip(&fit.links)
+            .filter(|(link, _)| link.surface.is_some())
+            .map(|(_, fit)| LinkJson {
+                name: fit.name.clone(),
+                points: fit.points,
+                rms: fit.rms_m,
+                visible: fit.visible,
+            })
+            .collect(),
+        joints: fit
+            .joints
+            .iter()
+            .map(|joint| JointJson {
+                name: joint.name.clone(),
+                value: joint.value,
+                observed: joint.observed,
+            })
+            .collect(),
+        rms: fit.rms_m,
+        iterations: fit.iterations,
+        cloud_points: cloud.len(),
+        time_s: fit.time_s,
+    })
+}
+
+impl AlignRobotOutput {
+    pub fn to_text(&self) -> String {
+        let [x, y, z] = self.base_pose.xyz.map(|v| crate::display_round(v, 6));
+        let [roll, pitch, yaw] = self.base_pose.rpy.map(|v| crate::display_round(v, 6));
+        let mut text = format!(
+            "base pose: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
+        );
+        for joint in &self.joints {
+            text += &format!(
+                "  {:<24} {:>11.6}{}\n",
+                joint.name,
+                crate::display_round(joint.value, 6),
+                if joint.observed {
+                    ""
+                } else {
+                    "  (not observed: start value kept)"
+                }
+            );
+        }
+        for link in &self.links {
+            text += &format!(
+                "  {:<24} {:>6} points, rms {:.3} mm{}\n",
+                link.name,
+                link.points,
+                link.rms * 1e3,
+                if link.visible { "" } else { "  (not visible)" }
+            );
+        }
+        text += &format!(
+            "{} cloud points, rms {:.3} mm, {} iterations, {:.1} ms\n",
+            self.cloud_points,
+            self.rms * 1e3,
+            self.iterations,
+            self.time_s * 1e3
+        );
+        text
+    }
+}

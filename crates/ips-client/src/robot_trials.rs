@@ -1,0 +1,163 @@
+//! `ips trials --robot NAME`: the thesis's PCA trials (3.4) on a shipped robot, the whole robot
+//! and each link, aligned independently (each as a rigid part, the thesis's way) and
+//! hierarchically (base pose and joints, children constrained by parents).
+
+use align_core::registration::articulated::ArticulatedBody;
+use align_core::robots::ShippedRobot;
+use align_core::trials::robot_scan::RobotScanOptions;
+use align_core::trials::robot_trials::{RobotScene, RobotTrialRow, Tally, run_robot_trials};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use serde::Serialize;
+
+use crate::BadInput;
+use crate::cli::TrialsArgs;
+
+#[derive(Debug, Serialize)]
+pub struct TallyJson {
+    pub succeeded: usize,
+    pub failed: usize,
+    pub mean_error_mm: f64,
+    pub mean_time_s: f64,
+}
+
+impl From<&Tally> for TallyJson {
+    fn from(tally: &Tally) -> Self {
+        Self {
+            succeeded: tally.succeeded,
+            failed: tally.failed,
+            mean_error_mm: tally.mean_error_m * 1e3,
+            mean_time_s: tally.mean_time_s,
+        }
+    }
+}
+
+#[derive(Debug, Serialize)]
+pub struct RobotRowJson {
+    pub object: String,
+    pub delta_mm: f64,
+    pub independent: Option<TallyJson>,
+    pub hierarchical: TallyJson,
+}
+
+#[derive(Debug, Serialize)]
+pub struct RobotTrialsOutput {
+    pub robot: String,
+    pub trials_per_delta: usize,
+    pub seed: u64,
+    pub cloud_points: usize,
+    pub rows: Vec<RobotRowJson>,
+}
+
+/// Where the trials put the robot: its root 0.2 m off the cell origin, turned 0.4 rad.
+pub fn trial_scene(robot: ShippedRobot) -> RobotScene {
+    RobotScene {
+        world_from_root: Isometry3::from_parts(
+            Translation3::new(0.2, -0.1, 0.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
+        ),
+        q: robot.home(),
+        scan: RobotScanOptions::default(),
+    }
+}
+
+pub fn run(
+    args: &TrialsArgs,
+    robot_name: &str,
+    mut progress: impl FnMut(&str),
+) -> Result<RobotTrialsOutput, BadInput> {
+    let robot = ShippedRobot::from_name(robot_name).ok_or_else(|| {
+        BadInput(format!(
+            "--robot {robot_name}: the shipped robots are {}",
+            ShippedRobot::ALL.map(|r| r.name()).join(", ")
+        ))
+    })?;
+    let deltas_mm = crate::parse_number_list(&args.deltas, "--deltas")?;
+    if let Some(bad) = deltas_mm.iter().find(|d| **d <= 0.0) {
+        return Err(BadInput(format!(
+            "--deltas: {bad} is not a positive distance in mm"
+        )));
+    }
+    if args.trials == 0 {
+        return Err(BadInput("--trials must be at least 1".to_owned()));
+    }
+    let deltas_m: Vec<f64> = deltas_mm.iter().map(|d| d * 1e-3).collect();
+    let model = robot.model().map_err(BadInput::new)?;
+    let body = ArticulatedBody::from_model(&model).map_err(BadInput::new)?;
+    let scene = trial_scene(robot);
+    let cloud_points = align_core::trials::robot_scan::scan_robot(
+        &body,
+        &scene.world_from_root,
+        &scene.q,
+        &scene.scan,
+    )
+    .len();
+    let rows = run_robot_trials(
+        &body,
+        &scene,
+        &deltas_m,
+        args.trials,
+        args.seed,
+        !args.hierarchical_only,
+        |delta_m, trial| {
+            if trial + 1 == args.trials {
+                progress(&format!(
+                    "{}: delta {:.0} mm done",
+                    robot.name(),
+                    delta_m * 1e3
+                ));
+            }
+        },
+    );
+    Ok(RobotTrialsOutput {
+        robot: robot.name().to_owned(),
+        trials_per_delta: args.trials,
+        seed: args.seed,
+        cloud_points,
+        rows: rows.iter().map(row_json).collect(),
+    })
+}
+
+fn row_json(row: &RobotTrialRow) -> RobotRowJson {
+    RobotRowJson {
+        object: row.object.clone(),
+        delta_mm: row.delta_m * 1e3,
+        independent: row.independent.as_ref().map(TallyJson::from),
+        hierarchical: TallyJson::from(&row.hierarchical),
+    }
+}
+
+impl RobotTrialsOutput {
+    pub fn to_markdown(&self) -> String {
+        let mut text = format!(
+            "Robot PCA trials on '{}' ({} cloud points), {} trials per delta, seed {} (success: surface deviation < 1 mm)\n\n",
+            self.robot, self.cloud_points, self.trials_per_delta, self.seed
+        );
+        text += "| Object | Delta (mm) | independent: succeed | independent: fail | independent: avg error (mm) | independent: avg time (s) | hierarchical: succeed | hierarchical: fail | hierarchical: avg error (mm) | hierarchical: avg time (s) |\n";
+        text += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        let mut objects: Vec<&str> = Vec::new();
+        for row in &self.rows {
+            if !objects.contains(&row.object.as_str()) {
+                objects.push(&row.object);
+            }
+        }
+        for object in objects {
+            for row in self.rows.iter().filter(|r| r.object == object) {
+                let independent = row.independent.as_ref().map_or_else(
+                    || "- | - | - | -".to_owned(),
+                    |t| {
+                        format!(
+                            "{} | {} | {:.3e} | {:.2e}",
+                            t.succeeded, t.failed, t.mean_error_mm, t.mean_time_s
+                        )
+                    },
+                );
+                let h = &row.hierarchical;
+                text += &format!(
+                    "| {} | {:.0} | {independent} | {} | {} | {:.3e} | {:.2e} |\n",
+                    row.object, row.delta_mm, h.succeeded, h.failed, h.mean_error_mm, h.mean_time_s
+                );
+            }
+        }
+        text
+    }
+}
