@@ -109,10 +109,10 @@ pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// `cargo test -p system-tests` does not build other packages' binaries: build them. Always,
-/// not only when missing: a binary left from before a source change would be tested instead of
-/// the code in the tree (cargo makes this a quick no-op when they are fresh).
-pub fn ensure_binaries(packages: &[&str]) {
+/// `cargo test -p system-tests` does not build other packages' binaries: build the workspace's.
+/// Always, not only when missing: a binary left from before a source change would be tested
+/// instead of the code in the tree (cargo makes this a quick no-op when they are fresh).
+pub fn ensure_binaries() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
     let mut command = Command::new(cargo);
     // The profile these tests were built with, so that the build reuses their artifacts (a
@@ -120,14 +120,16 @@ pub fn ensure_binaries(packages: &[&str]) {
     // binaries land next to the tests.
     let release = binary("").components().any(|c| c.as_os_str() == "release");
     let profile = if release { "release" } else { "test" };
+    // Every binary of the workspace, features unified as `cargo test --workspace` unifies them:
+    // building only some packages could pick other features and recompile shared dependencies.
     command
-        .args(["build", "--profile", profile])
+        .args(["build", "--profile", profile, "--workspace", "--bins"])
         .current_dir(repo_root());
-    for name in packages {
-        command.args(["-p", name]);
-    }
     let status = command.status().expect("cargo runs");
-    assert!(status.success(), "cargo build {packages:?} failed");
+    assert!(
+        status.success(),
+        "cargo build of the workspace binaries failed"
+    );
 }
 
 /// The venv's Python after `scripts/python-env.sh` made sure its clients are installed. Its

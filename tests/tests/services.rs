@@ -12,7 +12,7 @@ use system_tests::{binary, ensure_binaries, python, repo_root, spawn};
 
 #[test]
 fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
-    ensure_binaries(&["sim-robot", "robot-bridge"]);
+    ensure_binaries();
     let sim = spawn(
         binary("sim-robot"),
         &[
@@ -87,7 +87,7 @@ fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
 
 #[test]
 fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
-    ensure_binaries(&["sim-robot", "robot-bridge"]);
+    ensure_binaries();
     // The bridge listens first; the controller is pointed at it, as on a real cell.
     let bridge = spawn(
         binary("robot-bridge"),
@@ -170,7 +170,7 @@ fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
 
 #[test]
 fn bad_flags_exit_2_with_a_reason() {
-    ensure_binaries(&["sim-robot", "robot-bridge"]);
+    ensure_binaries();
     let taken = std::net::UdpSocket::bind("0.0.0.0:0").unwrap();
     let taken_port = taken.local_addr().unwrap().port().to_string();
     let cases: [(&str, &[&str], &str); 5] = [

@@ -51,7 +51,7 @@ fn python_session(
 
 #[test]
 fn session_survives_sigkill_and_aligns_to_the_truth() {
-    system_tests::ensure_binaries(&["sim-robot", "robot-bridge", "ips-client"]);
+    system_tests::ensure_binaries();
     let status = Command::new("bash")
         .arg(root().join("scripts/python-env.sh"))
         .status()

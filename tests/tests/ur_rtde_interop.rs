@@ -103,7 +103,7 @@ fn floats(value: &Value) -> Vec<f64> {
 
 #[test]
 fn ur_rtde_receive_interface_reads_the_simulated_joints_and_clock() {
-    ensure_binaries(&["sim-robot"]);
+    ensure_binaries();
     let python = python();
     let (sim, host) = spawn_sim_on_port_30004();
 

@@ -14,15 +14,7 @@ fn ensure_services_built() {
     let release = ips.components().any(|c| c.as_os_str() == "release");
     let profile = if release { "release" } else { "test" };
     let status = Command::new(cargo)
-        .args([
-            "build",
-            "--profile",
-            profile,
-            "-p",
-            "sim-robot",
-            "-p",
-            "robot-bridge",
-        ])
+        .args(["build", "--profile", profile, "--workspace", "--bins"])
         .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
         .status()
         .unwrap();

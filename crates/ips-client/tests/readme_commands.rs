@@ -54,7 +54,7 @@ fn ensure_services_built() {
             "--profile",
             if release { "release" } else { "test" },
         ])
-        .args(["-p", "sim-robot", "-p", "robot-bridge"])
+        .args(["--workspace", "--bins"])
         .current_dir(repo_root())
         .status()
         .expect("cargo runs");
