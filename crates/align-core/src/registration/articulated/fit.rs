@@ -203,6 +203,9 @@ impl<'a> Placed<'a> {
 
 const EDGE_REJECTION_M: f64 = 1e-3;
 
+/// Points the coarse level of a joint search scores candidates on (a stride sample).
+const COARSE_SEARCH_POINTS: usize = 1500;
+
 fn check_inputs(
     body: &ArticulatedBody,
     cloud: &[Point3<f64>],
@@ -404,8 +407,123 @@ fn reach_m(placed: &Placed, links: &[usize], origin: &Point3<f64>) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Sets `q[parameter]` to the value whose links are best supported by the scan, searching a
-/// window that `delta_m` allows around the current value (coarse grid, then a finer one).
+/// How far a parameter may move its links from the current value: the search window.
+struct Window {
+    parameter: usize,
+    half: f64,
+    /// Largest distance of its links from its axis (1 for prismatic joints: windows in m).
+    reach_m: f64,
+}
+
+impl Window {
+    fn new(
+        body: &ArticulatedBody,
+        placed: &Placed,
+        parameter: usize,
+        delta_m: f64,
+        voxel_m: f64,
+    ) -> Option<(Self, Point3<f64>)> {
+        let axes = body.axes(&placed.poses);
+        let (axis, _, _) = axes
+            .iter()
+            .flatten()
+            .find(|(_, p, _)| *p == parameter)
+            .copied()?;
+        let reach = reach_m(placed, &body.moved_by(parameter), &axis.origin).max(voxel_m);
+        // The joint moves its farthest point by reach * dq: a window twice delta at that point
+        // leaves room for the base's own error.
+        let (half, reach_m) = if body.parameters()[parameter].prismatic {
+            (2.0 * delta_m, 1.0)
+        } else {
+            ((2.0 * delta_m / reach).min(std::f64::consts::PI), reach)
+        };
+        Some((
+            Self {
+                parameter,
+                half,
+                reach_m,
+            },
+            axis.origin,
+        ))
+    }
+
+    fn sweep_m(&self) -> f64 {
+        self.half * self.reach_m
+    }
+
+    /// `steps + 1` values across `centre +- half`, inside the joint's limits.
+    fn grid(&self, body: &ArticulatedBody, centre: f64, half: f64, steps: usize) -> Vec<f64> {
+        let info = &body.parameters()[self.parameter];
+        let step = 2.0 * half / steps as f64;
+        (0..=steps)
+            .map(|i| (centre - half + i as f64 * step).clamp(info.lower, info.upper))
+            .collect()
+    }
+}
+
+/// True when turning `parameter` does not move its own links (those no deeper joint moves)
+/// along their normals: a cylinder spinning about its axis. Its value then shows only through
+/// the links beyond the next joint.
+fn spins_in_place(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    parameter: usize,
+    min_ratio: f64,
+) -> bool {
+    if body.parameters()[parameter].prismatic {
+        return false;
+    }
+    let axes = body.axes(&placed.poses);
+    let Some((axis, _, _)) = axes
+        .iter()
+        .flatten()
+        .find(|(_, p, _)| *p == parameter)
+        .copied()
+    else {
+        return false;
+    };
+    let own: Vec<usize> = body
+        .moved_by(parameter)
+        .into_iter()
+        .filter(|&link| body.movers(link).last() == Some(&parameter))
+        .collect();
+    let (mut sum, mut area, mut reach) = (0.0, 0.0, 0.0f64);
+    for &link in &own {
+        let Some(mesh) = &body.links()[link].surface else {
+            continue;
+        };
+        let vertices: Vec<Point3<f64>> = mesh.vertices().map(|v| placed.poses[link] * v).collect();
+        for (index, triangle) in mesh.triangles().iter().enumerate() {
+            let [a, b, c] = triangle.map(|i| vertices[i as usize]);
+            let centre = Point3::from((a.coords + b.coords + c.coords) / 3.0);
+            let normal = placed.poses[link].rotation * mesh.triangle_normal(index as u32);
+            let arm = centre - axis.origin;
+            let motion = axis.axis.cross(&arm).dot(&normal);
+            let weight = mesh.triangle_area(index as u32);
+            sum += weight * motion * motion;
+            area += weight;
+            reach = reach.max(axis.axis.cross(&arm).norm());
+        }
+    }
+    area > 0.0 && (sum / area).sqrt() < min_ratio * reach.max(1e-9)
+}
+
+/// The parameter of the joint right after `parameter` down the tree (the one moving the most
+/// of its links), if any.
+fn child_parameter(body: &ArticulatedBody, parameter: usize) -> Option<usize> {
+    let moved = body.moved_by(parameter);
+    (0..body.parameters().len())
+        .filter(|&other| other != parameter)
+        .map(|other| (other, body.moved_by(other)))
+        .filter(|(_, links)| !links.is_empty() && links.iter().all(|l| moved.contains(l)))
+        .max_by_key(|(_, links)| links.len())
+        .map(|(other, _)| other)
+}
+
+/// Sets `q[parameter]` to the value whose links explain the most scan points that the other
+/// links do not, searching a window that `delta_m` allows around the current value (coarse
+/// grid, then a finer one). A joint that spins its own links in place is searched together
+/// with the next joint, whose links are the only ones that show its value.
 fn search_joint(
     body: &ArticulatedBody,
     keypoints: &[Point3<f64>],
@@ -417,76 +535,96 @@ fn search_joint(
 ) {
     let moved = body.moved_by(parameter);
     let placed = Placed::new(body, world_from_root, q);
-    let axes = body.axes(&placed.poses);
-    let Some((axis, _, _)) = axes
-        .iter()
-        .flatten()
-        .find(|(_, p, _)| *p == parameter)
-        .copied()
+    let Some((window, origin)) = Window::new(body, &placed, parameter, delta_m, options.voxel_m)
     else {
         return;
     };
-    let reach = reach_m(&placed, &moved, &axis.origin).max(options.voxel_m);
-    let info = &body.parameters()[parameter];
-    // The joint moves its farthest point by reach * dq: a window twice delta at that point
-    // leaves room for the base's own error.
-    let half_window = if info.prismatic {
-        2.0 * delta_m
-    } else {
-        (2.0 * delta_m / reach).min(std::f64::consts::PI)
-    };
-    let sweep = if info.prismatic {
-        half_window
-    } else {
-        half_window * reach
-    };
+    let others: Vec<usize> = (0..body.links().len())
+        .filter(|link| !moved.contains(link))
+        .collect();
+    let coarse_band = 3.0 * options.voxel_m;
+    // Points another link already explains are nobody else's to claim: without this a small
+    // wrist link scores by lying on its parent's surface.
     let nearby: Vec<Point3<f64>> = keypoints
         .iter()
-        .filter(|p| (*p - axis.origin).norm() <= reach + sweep + 3.0 * options.voxel_m)
+        .filter(|p| {
+            (*p - origin).norm() <= window.reach_m.max(0.0) + window.sweep_m() + coarse_band
+        })
+        .filter(|p| !placed.supports(p, coarse_band, &others))
         .copied()
         .collect();
     if nearby.is_empty() {
         return;
     }
+    let partner = if spins_in_place(body, &placed, parameter, options.min_observability) {
+        child_parameter(body, parameter).and_then(|child| {
+            Window::new(body, &placed, child, delta_m, options.voxel_m).map(|(w, _)| w)
+        })
+    } else {
+        None
+    };
+    // The coarse level only has to find the right basin: a sample of the points does.
+    let stride = nearby.len().div_ceil(COARSE_SEARCH_POINTS);
+    let sample: Vec<Point3<f64>> = nearby.iter().step_by(stride).copied().collect();
+    let count = |trial: &[f64], band: f64, points: &[Point3<f64>]| {
+        let placed = Placed::new(body, world_from_root, trial);
+        points
+            .iter()
+            .filter(|p| placed.supports(p, band, &moved))
+            .count()
+    };
     let current = q[parameter];
     let mut centre = current;
-    let mut half = half_window;
+    let mut half = window.half;
+    let mut partner_value = partner.as_ref().map(|w| q[w.parameter]);
     // Coarse steps move the farthest point by about a coarse voxel or more, at most 24 of them.
-    let coarse_steps = ((2.0 * sweep / (3.0 * options.voxel_m)).ceil() as usize).clamp(4, 24);
-    for steps in [coarse_steps, 8] {
+    let coarse_steps = ((2.0 * window.sweep_m() / coarse_band).ceil() as usize).clamp(4, 24);
+    for (level, steps) in [coarse_steps, 8].into_iter().enumerate() {
         let step = 2.0 * half / steps as f64;
-        let move_m = if info.prismatic { step } else { step * reach };
-        let band = move_m.max(3.0 * options.voxel_m);
-        let candidates: Vec<f64> = (0..=steps)
-            .map(|i| (centre - half + i as f64 * step).clamp(info.lower, info.upper))
-            .collect();
-        let score = |value: f64| {
+        let band = (step * window.reach_m).max(coarse_band);
+        let candidates = window.grid(body, centre, half, steps);
+        let score = |value: f64| -> (usize, Option<f64>) {
             let mut trial = q.to_vec();
             trial[parameter] = value;
-            let placed = Placed::new(body, world_from_root, &trial);
-            nearby
-                .iter()
-                .filter(|p| placed.supports(p, band, &moved))
-                .count()
+            match (&partner, level) {
+                (Some(partner), 0) => partner
+                    .grid(body, q[partner.parameter], partner.half, 8)
+                    .into_iter()
+                    .map(|child| {
+                        trial[partner.parameter] = child;
+                        (count(&trial, band, &sample), Some(child))
+                    })
+                    .max_by_key(|(score, _)| *score)
+                    .unwrap_or((0, None)),
+                _ => {
+                    if let (Some(partner), Some(value)) = (&partner, partner_value) {
+                        trial[partner.parameter] = value;
+                    }
+                    let points = if level == 0 { &sample } else { &nearby };
+                    (count(&trial, band, points), partner_value)
+                }
+            }
         };
-        let scores: Vec<usize> = if options.parallel {
+        let scores: Vec<(usize, Option<f64>)> = if options.parallel {
             candidates.par_iter().map(|&v| score(v)).collect()
         } else {
             candidates.iter().map(|&v| score(v)).collect()
         };
         // Ties (a symmetric link) go to the value nearest the current one: never invent motion.
-        let best = candidates
-            .iter()
-            .zip(&scores)
-            .max_by(|a, b| {
-                a.1.cmp(b.1)
-                    .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
-            })
-            .map_or(current, |(&v, _)| v);
-        centre = best;
+        if let Some((&best, &(_, child))) = candidates.iter().zip(&scores).max_by(|a, b| {
+            a.1.0
+                .cmp(&b.1.0)
+                .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
+        }) {
+            centre = best;
+            partner_value = child;
+        }
         half = step;
     }
     q[parameter] = centre;
+    if let (Some(partner), Some(value)) = (&partner, partner_value) {
+        q[partner.parameter] = value;
+    }
 }
 
 /// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.
