@@ -21,11 +21,11 @@ fn ensure_services_built() {
     assert!(status.success());
 }
 
-#[test]
-fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
+/// Runs `ips demo ARGS` (which must include --json), which must succeed, and returns its document.
+fn run_demo(args: &[&str]) -> serde_json::Value {
     ensure_services_built();
     let output = Command::new(env!("CARGO_BIN_EXE_ips"))
-        .args(["demo", "--json"])
+        .args(args)
         .output()
         .unwrap();
     assert!(
@@ -33,7 +33,12 @@ fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+#[test]
+fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
+    let result = run_demo(&["demo", "--json"]);
     let error_m = result["pose_error_m"].as_f64().unwrap();
     let error_rad = result["pose_error_rad"].as_f64().unwrap();
     assert!(error_m < 1e-4, "{error_m} m");
@@ -44,17 +49,7 @@ fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
 
 #[test]
 fn demo_on_the_iiwa_over_fri_recovers_the_hidden_pose() {
-    ensure_services_built();
-    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
-        .args(["demo", "--robot", "iiwa14", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let result = run_demo(&["demo", "--robot", "iiwa14", "--json"]);
     assert_eq!(result["robot"], "iiwa14");
     let error_m = result["pose_error_m"].as_f64().unwrap();
     let error_rad = result["pose_error_rad"].as_f64().unwrap();
@@ -77,17 +72,7 @@ fn demo_refuses_robots_it_cannot_simulate() {
 /// candidate, estimate it within 3 standard errors and leave the part pose better than plain
 /// alignment.
 fn demo_with(effect: &str, parameter: &str, truth: f64) {
-    ensure_services_built();
-    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
-        .args(["demo", "--effect", effect, "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let result = run_demo(&["demo", "--effect", effect, "--json"]);
     let diagnosis = &result["diagnosis"];
     // With 16 touches and the declared 50 um noise, some pairs (a larger ball and a longer TCP)
     // stay within the ambiguity margin: the diagnosis may say so, but its best candidate must
@@ -144,17 +129,7 @@ fn demo_finds_undeclared_gravity_sag() {
 /// effect may be applied that leaves the part further from the truth.
 #[test]
 fn demo_with_an_effect_outside_the_library_is_never_made_worse() {
-    ensure_services_built();
-    let output = Command::new(env!("CARGO_BIN_EXE_ips"))
-        .args(["demo", "--effect", "cyclic_encoder", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let result: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let result = run_demo(&["demo", "--effect", "cyclic_encoder", "--json"]);
     let diagnosis = &result["diagnosis"];
     assert_ne!(diagnosis["verdict"], "no_effect", "{diagnosis}");
     let before = result["pose_error_m"].as_f64().unwrap();

@@ -123,6 +123,15 @@ fn bridge_status(rep: &zmq::Socket) -> Value {
     status["body"].clone()
 }
 
+/// Waits until the bridge reports its controller connected.
+fn wait_connected(rep: &zmq::Socket) -> Value {
+    wait_until(
+        Duration::from_secs(10),
+        || bridge_status(rep),
+        |s| s["controller"] == "connected",
+    )
+}
+
 fn subscriber(context: &zmq::Context, bridge: &Handle) -> zmq::Socket {
     let sub = socket(context, zmq::SUB, &bridge.pub_endpoint, 3000);
     sub.set_subscribe(b"").unwrap();
@@ -238,11 +247,7 @@ fn a_one_millisecond_controller_is_mirrored_at_its_rate() {
     let control = Control::new(&context, &sim);
     let moving_since = control.sine();
     let rep = socket(&context, zmq::REQ, &bridge.rep_endpoint, 5000);
-    wait_until(
-        Duration::from_secs(10),
-        || bridge_status(&rep),
-        |s| s["controller"] == "connected",
-    );
+    wait_connected(&rep);
     let sub = subscriber(&context, &bridge);
     assert_eq!(request(&rep, THESIS_START), THESIS_OK);
     let received: Vec<Value> = (0..300).map(|_| next_state(&sub)).collect();
@@ -266,11 +271,7 @@ fn a_controller_killed_and_restarted_is_detected_and_the_stream_resumes() {
     let control = Control::new(&context, &sim);
     control.sine();
     let rep = socket(&context, zmq::REQ, &bridge.rep_endpoint, 5000);
-    wait_until(
-        Duration::from_secs(10),
-        || bridge_status(&rep),
-        |s| s["controller"] == "connected",
-    );
+    wait_connected(&rep);
     let sub = subscriber(&context, &bridge);
     assert_eq!(request(&rep, THESIS_START), THESIS_OK);
     let before: Vec<Value> = (0..20).map(|_| next_state(&sub)).collect();
@@ -504,11 +505,7 @@ fn datagrams_that_are_not_the_controllers_are_dropped_and_counted() {
     let target = SocketAddr::from(([127, 0, 0, 1], port));
     let sim = simulator(target, 5);
     let rep = socket(&context, zmq::REQ, &bridge.rep_endpoint, 5000);
-    wait_until(
-        Duration::from_secs(10),
-        || bridge_status(&rep),
-        |s| s["controller"] == "connected",
-    );
+    wait_connected(&rep);
     let stranger = UdpSocket::bind("127.0.0.1:0").unwrap();
     for garbage in [&b"\xde\xad\xbe\xef"[..], &[0u8; 1600][..], b"{\"json\":1}"] {
         stranger.send_to(garbage, target).unwrap();
