@@ -5,6 +5,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 UR_RTDE_VERSION=1.6.5
+# Test binaries run this concurrently (cargo runs several test threads and processes). Without
+# a lock, a second run sees a half-installed package, reinstalls it over the first one's files
+# and a running interpreter that has mmapped the old .so dies with SIGBUS. One run at a time;
+# the later ones then find everything installed and only check.
+exec 9>.venv.lock
+flock 9
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi

@@ -52,12 +52,7 @@ fn python_session(
 #[test]
 fn session_survives_sigkill_and_aligns_to_the_truth() {
     system_tests::ensure_binaries();
-    let status = Command::new("bash")
-        .arg(root().join("scripts/python-env.sh"))
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let python = root().join(".venv/bin/python");
+    let python = system_tests::python();
 
     // The example session's robot, tool and part, without inspections.
     let example = root().join("examples/step_block_ur10");
