@@ -188,6 +188,10 @@ pub struct TrialsArgs {
     /// time).
     #[arg(long, requires = "robot")]
     pub hierarchical_only: bool,
+    /// With --robot: only the independent alignment (each method draws its own seeded starts,
+    /// so its figures match those of a run with both).
+    #[arg(long, requires = "robot", conflicts_with = "hierarchical_only")]
+    pub independent_only: bool,
     /// Print one JSON document instead of Markdown tables.
     #[arg(long)]
     pub json: bool,

@@ -5,7 +5,9 @@
 use align_core::registration::articulated::ArticulatedBody;
 use align_core::robots::ShippedRobot;
 use align_core::trials::robot_scan::RobotScanOptions;
-use align_core::trials::robot_trials::{RobotScene, RobotTrialRow, Tally, run_robot_trials};
+use align_core::trials::robot_trials::{
+    Methods, RobotScene, RobotTrialRow, Tally, run_robot_trials,
+};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Serialize;
 
@@ -36,7 +38,7 @@ pub struct RobotRowJson {
     pub object: String,
     pub delta_mm: f64,
     pub independent: Option<TallyJson>,
-    pub hierarchical: TallyJson,
+    pub hierarchical: Option<TallyJson>,
 }
 
 #[derive(Debug, Serialize)]
@@ -97,7 +99,10 @@ pub fn run(
         &deltas_m,
         args.trials,
         args.seed,
-        !args.hierarchical_only,
+        Methods {
+            independent: !args.hierarchical_only,
+            hierarchical: !args.independent_only,
+        },
         |delta_m, trial| {
             if trial + 1 == args.trials {
                 progress(&format!(
@@ -122,7 +127,7 @@ fn row_json(row: &RobotTrialRow) -> RobotRowJson {
         object: row.object.clone(),
         delta_mm: row.delta_m * 1e3,
         independent: row.independent.as_ref().map(TallyJson::from),
-        hierarchical: TallyJson::from(&row.hierarchical),
+        hierarchical: row.hierarchical.as_ref().map(TallyJson::from),
     }
 }
 
@@ -142,19 +147,23 @@ impl RobotTrialsOutput {
         }
         for object in objects {
             for row in self.rows.iter().filter(|r| r.object == object) {
-                let independent = row.independent.as_ref().map_or_else(
-                    || "- | - | - | -".to_owned(),
-                    |t| {
-                        format!(
-                            "{} | {} | {:.3e} | {:.2e}",
-                            t.succeeded, t.failed, t.mean_error_mm, t.mean_time_s
-                        )
-                    },
-                );
-                let h = &row.hierarchical;
+                let cells = |tally: &Option<TallyJson>| {
+                    tally.as_ref().map_or_else(
+                        || "- | - | - | -".to_owned(),
+                        |t| {
+                            format!(
+                                "{} | {} | {:.3e} | {:.2e}",
+                                t.succeeded, t.failed, t.mean_error_mm, t.mean_time_s
+                            )
+                        },
+                    )
+                };
                 text += &format!(
-                    "| {} | {:.0} | {independent} | {} | {} | {:.3e} | {:.2e} |\n",
-                    row.object, row.delta_mm, h.succeeded, h.failed, h.mean_error_mm, h.mean_time_s
+                    "| {} | {:.0} | {} | {} |\n",
+                    row.object,
+                    row.delta_mm,
+                    cells(&row.independent),
+                    cells(&row.hierarchical)
                 );
             }
         }

@@ -144,7 +144,14 @@ pub struct RobotTrialRow {
     pub object: String,
     pub delta_m: f64,
     pub independent: Option<Tally>,
-    pub hierarchical: Tally,
+    pub hierarchical: Option<Tally>,
+}
+
+/// Which methods a trial run compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Methods {
+    pub independent: bool,
+    pub hierarchical: bool,
 }
 
 /// The scene the trials scan: the robot's root at `world_from_root`, joints at `q`.
@@ -153,6 +160,57 @@ pub struct RobotScene {
     pub world_from_root: Isometry3<f64>,
     pub q: Vec<f64>,
     pub scan: RobotScanOptions,
+}
+
+/// Mixed into the seed of the independent method's stream.
+const INDEPENDENT_STREAM: u64 = 0x1D3E_7A11_0000_0001;
+
+/// One hierarchical fit from a perturbed start: the outcome for the whole robot (its worst
+/// link), then one per link of `links`.
+fn hierarchical_trial(
+    body: &ArticulatedBody,
+    scene: &RobotScene,
+    cloud: &[Point3<f64>],
+    poses: &[Isometry3<f64>],
+    links: &[usize],
+    delta_m: f64,
+    rng: &mut TrialRng,
+) -> Vec<Outcome> {
+    let (base, q0) = perturb_robot(body, &scene.world_from_root, &scene.q, delta_m, rng);
+    let started = Instant::now();
+    let fit = align_robot(
+        body,
+        cloud,
+        &base,
+        &q0,
+        delta_m,
+        &RobotFitOptions::default(),
+    );
+    let time_s = started.elapsed().as_secs_f64();
+    let fitted = fit
+        .as_ref()
+        .ok()
+        .map(|f| body.link_poses(&f.world_from_root, &f.q));
+    let per_link: Vec<f64> = links
+        .iter()
+        .map(|&link| {
+            fitted.as_ref().map_or(FAILED_ERROR_M, |fitted| {
+                surface_deviation_m(
+                    body.links()[link].surface.as_ref().expect("has surface"),
+                    &fitted[link],
+                    &poses[link],
+                )
+            })
+        })
+        .collect();
+    let worst = per_link.iter().copied().fold(0.0, f64::max);
+    std::iter::once(worst)
+        .chain(per_link)
+        .map(|error_m| Outcome {
+            error_m: finite_or_delta(error_m, delta_m),
+            time_s,
+        })
+        .collect()
 }
 
 /// A failed alignment counts with this error (it returned no pose).
@@ -167,15 +225,16 @@ fn finite_or_delta(error_m: f64, delta_m: f64) -> f64 {
 }
 
 /// Runs `trials` seeded trials per delta: the hierarchical fit of the robot from a perturbed
-/// start, and (with `independent`) the rigid alignment of the whole robot and of each link from
-/// the thesis's displacement. Links are those with geometry.
+/// start and the rigid alignment of the whole robot and of each link from the thesis's
+/// displacement, as `methods` asks. Links are those with geometry. Each method draws from its
+/// own seeded stream, so a method's figures are the same whether or not the other one runs.
 pub fn run_robot_trials(
     body: &ArticulatedBody,
     scene: &RobotScene,
     deltas_m: &[f64],
     trials: usize,
     seed: u64,
-    independent: bool,
+    methods: Methods,
     mut on_trial: impl FnMut(f64, usize),
 ) -> Vec<RobotTrialRow> {
     let cloud = scan_robot(body, &scene.world_from_root, &scene.q, &scene.scan);
@@ -184,45 +243,23 @@ pub fn run_robot_trials(
         .filter(|&l| body.links()[l].surface.is_some())
         .collect();
     let whole = body.rigid_mesh(&scene.q);
-    let fit_options = RobotFitOptions::default();
     let pca_options = PcaOptions::default();
     let mut rows = Vec::new();
     for &delta_m in deltas_m {
         let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
+        let mut rigid_rng = TrialRng::new(seed ^ delta_m.to_bits() ^ INDEPENDENT_STREAM);
         // Outcomes per object: index 0 the whole robot, then one per link.
         let mut hierarchical = vec![Vec::new(); links.len() + 1];
         let mut rigid = vec![Vec::new(); links.len() + 1];
         for trial in 0..trials {
             on_trial(delta_m, trial);
-            let (base, q0) =
-                perturb_robot(body, &scene.world_from_root, &scene.q, delta_m, &mut rng);
-            let started = Instant::now();
-            let fit = align_robot(body, &cloud, &base, &q0, delta_m, &fit_options);
-            let time_s = started.elapsed().as_secs_f64();
-            let fitted = fit
-                .as_ref()
-                .ok()
-                .map(|f| body.link_poses(&f.world_from_root, &f.q));
-            let mut worst: f64 = 0.0;
-            for (slot, &link) in links.iter().enumerate() {
-                let error_m = fitted.as_ref().map_or(FAILED_ERROR_M, |fitted| {
-                    surface_deviation_m(
-                        body.links()[link].surface.as_ref().expect("has surface"),
-                        &fitted[link],
-                        &poses[link],
-                    )
-                });
-                worst = worst.max(error_m);
-                hierarchical[slot + 1].push(Outcome {
-                    error_m: finite_or_delta(error_m, delta_m),
-                    time_s,
-                });
+            if methods.hierarchical {
+                hierarchical_trial(body, scene, &cloud, &poses, &links, delta_m, &mut rng)
+                    .into_iter()
+                    .zip(hierarchical.iter_mut())
+                    .for_each(|(outcome, slot)| slot.push(outcome));
             }
-            hierarchical[0].push(Outcome {
-                error_m: finite_or_delta(worst, delta_m),
-                time_s,
-            });
-            if !independent {
+            if !methods.independent {
                 continue;
             }
             let rigid_trial = |mesh: &Mesh, truth: &Isometry3<f64>, rng: &mut TrialRng| {
@@ -237,11 +274,11 @@ pub fn run_robot_trials(
                 Outcome { error_m, time_s }
             };
             if let Some(mesh) = &whole {
-                rigid[0].push(rigid_trial(mesh, &scene.world_from_root, &mut rng));
+                rigid[0].push(rigid_trial(mesh, &scene.world_from_root, &mut rigid_rng));
             }
             for (slot, &link) in links.iter().enumerate() {
                 let mesh = body.links()[link].surface.as_ref().expect("has surface");
-                rigid[slot + 1].push(rigid_trial(mesh, &poses[link], &mut rng));
+                rigid[slot + 1].push(rigid_trial(mesh, &poses[link], &mut rigid_rng));
             }
         }
         let names = std::iter::once(body.robot.clone())
@@ -250,8 +287,12 @@ pub fn run_robot_trials(
             rows.push(RobotTrialRow {
                 object,
                 delta_m,
-                independent: independent.then(|| Tally::from_outcomes(&rigid[slot])),
-                hierarchical: Tally::from_outcomes(&hierarchical[slot]),
+                independent: methods
+                    .independent
+                    .then(|| Tally::from_outcomes(&rigid[slot])),
+                hierarchical: methods
+                    .hierarchical
+                    .then(|| Tally::from_outcomes(&hierarchical[slot])),
             });
         }
     }
