@@ -180,8 +180,8 @@ pub fn align_cloud(
     let mut starts = 1;
     let mut schedule_from = delta0_m;
     if options.starts > 0 {
-        let (best, explored) = explore(mesh, cloud, base_from_part_start, delta0_m, options);
-        start = best;
+        let (scored, explored) = explore(mesh, cloud, base_from_part_start, delta0_m, options);
+        start = scored.first().map_or(start, |(_, pose)| *pose);
         starts += explored;
         // The exploration ended within a few voxels of its optimum: refining from a wide band
         // again would only let the clutter back in.
@@ -318,14 +318,15 @@ fn consensus(mesh: &Mesh, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, band
 
 /// Global exploration for large deltas: short runs on coarse keypoints from the start and from
 /// the start turned about the part's centroid by rotations spread over the ball the user's delta
-/// allows; returns the start of the run with the best consensus and how many runs were made.
+/// allows; returns the ends of the runs with their consensus, best first, and how many runs
+/// were made.
 fn explore(
     mesh: &Mesh,
     cloud: &[Point3<f64>],
     start: &Isometry3<f64>,
     delta0_m: f64,
     options: &PcaOptions,
-) -> (Isometry3<f64>, usize) {
+) -> (Vec<(f64, Isometry3<f64>)>, usize) {
     let coarse = voxel_representatives(cloud, options.voxel_m * 3.0);
     let short = PcaOptions {
         max_iterations: 40,
@@ -351,7 +352,7 @@ fn explore(
             );
         }
     }
-    let scored: Vec<(f64, Isometry3<f64>)> = candidates
+    let mut scored: Vec<(f64, Isometry3<f64>)> = candidates
         .par_iter()
         .map(|candidate| {
             let run = run_schedule(
@@ -367,11 +368,37 @@ fn explore(
             (consensus(mesh, &coarse, &run.pose, band), run.pose)
         })
         .collect();
-    let best = scored
-        .iter()
-        .max_by(|a, b| a.0.total_cmp(&b.0))
-        .map_or(*start, |(_, pose)| *pose);
-    (best, candidates.len() - 1)
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    (scored, candidates.len() - 1)
+}
+
+/// Rigid poses of `mesh` in `cloud` within what `delta0_m` allows from `start`, best consensus
+/// first, at most `count` of them and no two within `distinct_m` of each other (thesis pose
+/// distance): the ends of the short runs of the exploration, for a caller that checks several.
+pub fn pose_candidates(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+    count: usize,
+    distinct_m: f64,
+) -> Vec<Isometry3<f64>> {
+    let (scored, _) = explore(mesh, cloud, start, delta0_m, options);
+    let radius_m = mesh.radius_m();
+    let mut kept: Vec<Isometry3<f64>> = Vec::new();
+    for (_, pose) in scored {
+        if kept.len() == count {
+            break;
+        }
+        if kept
+            .iter()
+            .all(|k| pose_distance(k, &pose, radius_m) > distinct_m)
+        {
+            kept.push(pose);
+        }
+    }
+    kept
 }
 
 const EDGE_REJECTION_M: f64 = 1e-3;

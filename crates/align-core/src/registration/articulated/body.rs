@@ -335,7 +335,8 @@ impl ArticulatedBody {
         self.rigid_mesh_of(q, &fixed)
     }
 
-    fn rigid_mesh_of(&self, q: &[f64], links: &[usize]) -> Option<Mesh> {
+    /// `links` at `q` as one mesh in the root frame.
+    pub fn rigid_mesh_of(&self, q: &[f64], links: &[usize]) -> Option<Mesh> {
         let poses = self.link_poses(&Isometry3::identity(), q);
         let mut soup = TriangleSoup::default();
         for &link in links {

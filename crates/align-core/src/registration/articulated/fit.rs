@@ -1,15 +1,25 @@
 //! Hierarchical alignment of a robot in a scan (thesis 3.5, proposed there, built here): the base
 //! pose and the joint values, each link constrained by its parent.
 //!
-//! 1. The base: the whole robot at the start joints, aligned as one rigid part with Point Cloud
-//!    Alignment (its filters, weights, schedule and exploration).
-//! 2. Down the tree: each joint's value by a 1-D search (coarse grid, then fine) scored by how
-//!    many scan points the links it moves explain, with everything above it fixed. A link is only
-//!    ever placed where its parent allows, which is what the independent alignment lacked.
+//! 1. Base hypotheses: the whole robot at the start joints aligned as one rigid part with Point
+//!    Cloud Alignment (its filters, weights, schedule and exploration); and, when the start may
+//!    be off by more than the base is big, the best few rigid alignments of the proximal links
+//!    (the base and what only the first joint moves), which do not depend on the other joints.
+//! 2. Down the tree, a beam search: each joint's value by a 1-D search (coarse grid, then fine
+//!    around each of the best local maxima) scored by how many scan points the links it moves
+//!    explain (points buried inside a link count against it), with everything above it fixed. A
+//!    link is only ever placed where its parent allows, which is what the independent alignment
+//!    lacked. After each joint the decided links (those every joint above has been searched
+//!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
+//!    decided links explain the most points go on: a joint misled by links below it that are
+//!    still far off survives as a runner-up until those links decide.
 //! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
 //!    cos-weighted points within a band that shrinks to `band_min_m`, each point assigned to
-//!    its nearest link surface. Steps 2 and 3 repeat (`search_passes`), so a joint searched with
-//!    its children still at the start is searched again once they are close.
+//!    its nearest link surface; the joints are searched once more near the answer and refined
+//!    on every keypoint (`search_passes`).
+//! 4. Half turns: a joint whose window allows it is tried turned by pi with the joints below it
+//!    searched again (a spherical wrist reaches the same poses as (a + pi, -b, c + pi)), and
+//!    kept when the robot then explains more of the scan.
 //!
 //! Nothing is invented: a joint whose links hold too few points, or whose motion the points do
 //! not constrain (a cylinder turning about its own axis), keeps its start value and is reported.
@@ -19,8 +29,8 @@ use std::time::Instant;
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-use super::body::ArticulatedBody;
-use crate::registration::pca::{PcaError, PcaOptions, align_cloud};
+use super::body::{ArticulatedBody, JointAxis};
+use crate::registration::pca::{PcaError, PcaOptions, align_cloud, pose_candidates};
 use crate::registration::sampling::voxel_representatives;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -35,6 +45,11 @@ pub struct RobotFitOptions {
     /// its reach per radian (RMS) is not constrained by the scan.
     pub min_observability: f64,
     pub search_passes: usize,
+    /// States the first search down the tree keeps at each joint.
+    pub beam_width: usize,
+    /// Further base poses the search starts from when the start may be off by more than the
+    /// base is big: rigid alignments of the base and the links only the first joint moves.
+    pub base_candidates: usize,
     pub max_iterations: usize,
     /// The refinement stops when a step moves the points along their normals by less than this
     /// (RMS), m.
@@ -52,13 +67,18 @@ impl Default for RobotFitOptions {
             min_link_points: 12,
             min_observability: 0.05,
             search_passes: 2,
+            beam_width: 6,
+            base_candidates: 4,
             max_iterations: 60,
-            tolerance_m: 1e-5,
+            // A tenth of a millimetre: a tenth of the success bar, below the scan's noise.
+            tolerance_m: 1e-4,
             parallel: true,
-            // 10 mm keypoints: the rigid stage only has to bring the base near, the joints
-            // are still wrong while it runs.
+            // 15 mm keypoints and a short schedule: the rigid stage only has to bring the base
+            // near, the joints are still wrong while it runs (so it need not converge either).
             base: PcaOptions {
-                voxel_m: 0.01,
+                voxel_m: 0.015,
+                schedule_iterations: 40,
+                max_iterations: 60,
                 ..PcaOptions::default()
             },
         }
@@ -187,6 +207,38 @@ impl<'a> Placed<'a> {
         best
     }
 
+    /// What `point` says about the links placed here: +1 when it lies on the surface of one of
+    /// `links` (within `band` outside, within `inside_m` inside), -2 when it lies deeper inside
+    /// one (a scanner cannot see into a solid: a link crossing the floor or a neighbour is
+    /// wrong there), 0 otherwise.
+    fn evidence(&self, point: &Point3<f64>, band: f64, inside_m: f64, links: &[usize]) -> i64 {
+        let mut buried = false;
+        for &link in links {
+            let Some(surface) = &self.body.links()[link].surface else {
+                continue;
+            };
+            let local = self.inverse[link] * point;
+            let (lower, upper) = surface.bounds();
+            if !(0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band) {
+                continue;
+            }
+            match surface.closest_point_within(&local, band) {
+                Some(closest) if closest.signed_distance >= -inside_m => return 1,
+                Some(_) => buried = true,
+                None => {
+                    let in_box = (0..3).all(|a| local[a] >= lower[a] && local[a] <= upper[a]);
+                    if in_box
+                        && surface.is_watertight()
+                        && surface.closest_point(&local).signed_distance < -inside_m
+                    {
+                        buried = true;
+                    }
+                }
+            }
+        }
+        if buried { -2 } else { 0 }
+    }
+
     /// Whether `point` lies within `band` of the surface of one of `links`.
     fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
         links.iter().any(|&link| {
@@ -205,6 +257,8 @@ const EDGE_REJECTION_M: f64 = 1e-3;
 
 /// Points the coarse level of a joint search scores candidates on (a stride sample).
 const COARSE_SEARCH_POINTS: usize = 1500;
+/// Points the fine level scores on: enough that a step of the fine grid changes the count.
+const FINE_SEARCH_POINTS: usize = 4000;
 
 fn check_inputs(
     body: &ArticulatedBody,
@@ -288,7 +342,7 @@ pub fn align_robot(
     }
     let keypoints = voxel_representatives(&near, options.voxel_m);
     let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
-    let mut world_from_root = match body.rigid_mesh(q0) {
+    let whole = match body.rigid_mesh(q0) {
         Some(mesh) => {
             align_cloud(&mesh, &near, world_from_root_start, delta_m, &options.base)
                 .map_err(RobotFitError::Base)?
@@ -296,10 +350,32 @@ pub fn align_robot(
         }
         None => *world_from_root_start,
     };
-    let mut q = q0.to_vec();
-    let mut iterations = 0;
-    let passes = options.search_passes.max(1);
-    for pass in 0..passes {
+    let mut hypotheses = vec![whole];
+    hypotheses.extend(proximal_candidates(
+        body,
+        &near,
+        world_from_root_start,
+        q0,
+        delta_m,
+        options,
+    ));
+    let (mut world_from_root, mut q) =
+        beam_search(body, &coarse, &hypotheses, q0, delta_m, options);
+    let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+    let mut iterations = refine(
+        body,
+        &coarse,
+        &mut world_from_root,
+        &mut q,
+        band0,
+        &RobotFitOptions {
+            max_iterations: 15,
+            ..options.clone()
+        },
+    );
+    // Again with every joint near: a joint searched while the links below it were far off is
+    // searched once more, then all are refined on every keypoint.
+    for pass in 1..options.search_passes.max(1) {
         for parameter in search_order(body) {
             search_joint(
                 body,
@@ -311,23 +387,27 @@ pub fn align_robot(
                 options,
             );
         }
-        // Coarse keypoints while joints may still jump; every keypoint for the last pass.
-        let last = pass + 1 == passes;
-        let points = if last { &keypoints } else { &coarse };
-        let pass_options = RobotFitOptions {
-            max_iterations: if last { options.max_iterations } else { 15 },
-            ..options.clone()
-        };
-        let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+        let last = pass + 1 == options.search_passes;
         iterations += refine(
             body,
-            points,
+            if last { &keypoints } else { &coarse },
             &mut world_from_root,
             &mut q,
             band0,
-            &pass_options,
+            &RobotFitOptions {
+                max_iterations: if last { options.max_iterations } else { 15 },
+                ..options.clone()
+            },
         );
     }
+    iterations += flip_check(
+        body,
+        &keypoints,
+        &mut world_from_root,
+        &mut q,
+        delta_m,
+        options,
+    );
     let placed = Placed::new(body, &world_from_root, &q);
     let all: Vec<usize> = (0..body.links().len()).collect();
     let matches = correspond(
@@ -482,21 +562,34 @@ fn spins_in_place(
     else {
         return false;
     };
-    let own: Vec<usize> = body
-        .moved_by(parameter)
-        .into_iter()
-        .filter(|&link| body.movers(link).last() == Some(&parameter))
-        .collect();
+    turns_in_place(
+        body,
+        &placed.poses,
+        &own_links(body, parameter),
+        &axis,
+        min_ratio,
+    )
+}
+
+/// True when turning `links` (placed at `poses`) about `axis` does not move their surfaces
+/// along their normals: RMS normal motion per radian below `min_ratio` of their reach.
+fn turns_in_place(
+    body: &ArticulatedBody,
+    poses: &[Isometry3<f64>],
+    links: &[usize],
+    axis: &JointAxis,
+    min_ratio: f64,
+) -> bool {
     let (mut sum, mut area, mut reach) = (0.0, 0.0, 0.0f64);
-    for &link in &own {
+    for &link in links {
         let Some(mesh) = &body.links()[link].surface else {
             continue;
         };
-        let vertices: Vec<Point3<f64>> = mesh.vertices().map(|v| placed.poses[link] * v).collect();
+        let vertices: Vec<Point3<f64>> = mesh.vertices().map(|v| poses[link] * v).collect();
         for (index, triangle) in mesh.triangles().iter().enumerate() {
             let [a, b, c] = triangle.map(|i| vertices[i as usize]);
             let centre = Point3::from((a.coords + b.coords + c.coords) / 3.0);
-            let normal = placed.poses[link].rotation * mesh.triangle_normal(index as u32);
+            let normal = poses[link].rotation * mesh.triangle_normal(index as u32);
             let arm = centre - axis.origin;
             let motion = axis.axis.cross(&arm).dot(&normal);
             let weight = mesh.triangle_area(index as u32);
@@ -520,10 +613,346 @@ fn child_parameter(body: &ArticulatedBody, parameter: usize) -> Option<usize> {
         .map(|(other, _)| other)
 }
 
-/// Sets `q[parameter]` to the value whose links explain the most scan points that the other
-/// links do not, searching a window that `delta_m` allows around the current value (coarse
-/// grid, then a finer one). A joint that spins its own links in place is searched together
-/// with the next joint, whose links are the only ones that show its value.
+/// Base poses from rigid alignments of the proximal links (the base and the links only the
+/// first joint moves) when the start may be off by more than they are big; none otherwise. A
+/// base that looks the same at every angle about the first joint is turned to the start's
+/// angle about it: the scan cannot tell, and the joints below start nearest their own values.
+fn proximal_candidates(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root_start: &Isometry3<f64>,
+    q0: &[f64],
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> Vec<Isometry3<f64>> {
+    if options.base_candidates == 0 {
+        return Vec::new();
+    }
+    let first = search_order(body).first().copied();
+    let proximal: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.movers(l).iter().all(|p| Some(*p) == first))
+        .collect();
+    let Some(mesh) = body.rigid_mesh_of(q0, &proximal) else {
+        return Vec::new();
+    };
+    // The root moves by up to about twice delta (the robot turns about its centroid).
+    let root_bound_m = 2.0 * delta_m;
+    if root_bound_m <= mesh.radius_m() {
+        return Vec::new();
+    }
+    let candidates = pose_candidates(
+        &mesh,
+        cloud,
+        world_from_root_start,
+        root_bound_m,
+        &options.base,
+        options.base_candidates,
+        DISTINCT_BASE_M,
+    );
+    let root_poses = body.link_poses(&Isometry3::identity(), q0);
+    let axis = first.and_then(|first| {
+        body.axes(&root_poses)
+            .into_iter()
+            .flatten()
+            .find(|(_, p, _)| *p == first)
+            .map(|(axis, _, _)| axis)
+    });
+    let fixed: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.movers(l).is_empty())
+        .collect();
+    match axis {
+        Some(axis)
+            if !axis.prismatic
+                && turns_in_place(body, &root_poses, &fixed, &axis, options.min_observability) =>
+        {
+            candidates
+                .iter()
+                .map(|c| turned_towards(c, world_from_root_start, &axis))
+                .collect()
+        }
+        _ => candidates,
+    }
+}
+
+/// Base candidates closer than this (thesis pose distance) are one.
+const DISTINCT_BASE_M: f64 = 0.05;
+
+/// Tries each revolute joint turned half a turn, with the joints below it searched again and
+/// everything refined, and keeps what explains the scan better. A wrist (or shoulder) whose
+/// three axes meet reaches the same link poses as (a + pi, -b, c + pi): continuous refinement
+/// cannot cross between the two, and on nearly symmetric links the searches may settle on the
+/// wrong one. Only joints whose window allows a half turn are tried. Returns the iterations.
+fn flip_check(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &mut Isometry3<f64>,
+    q: &mut Vec<f64>,
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> usize {
+    let with_surface: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.links()[l].surface.is_some())
+        .collect();
+    let band = options.band_min_m;
+    let score = |base: &Isometry3<f64>, q: &[f64]| {
+        coverage(
+            body,
+            keypoints,
+            base,
+            q,
+            &with_surface,
+            band,
+            options.parallel,
+        )
+    };
+    let order = search_order(body);
+    let mut best = score(world_from_root, q);
+    let mut iterations = 0;
+    let refine_options = RobotFitOptions {
+        max_iterations: 20,
+        ..options.clone()
+    };
+    let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+    for (index, &parameter) in order.iter().enumerate() {
+        let info = &body.parameters()[parameter];
+        if info.prismatic {
+            continue;
+        }
+        let placed = Placed::new(body, world_from_root, q);
+        let Some((window, _)) = Window::new(body, &placed, parameter, delta_m, options.voxel_m)
+        else {
+            continue;
+        };
+        if window.half < std::f64::consts::FRAC_PI_2 {
+            continue;
+        }
+        let flipped = q[parameter] + std::f64::consts::PI;
+        let flipped = if flipped > info.upper {
+            flipped - 2.0 * std::f64::consts::PI
+        } else {
+            flipped
+        };
+        if flipped < info.lower || flipped > info.upper {
+            continue;
+        }
+        let mut trial_q = q.clone();
+        let mut trial_base = *world_from_root;
+        trial_q[parameter] = flipped;
+        for &below in &order[index + 1..] {
+            search_joint(
+                body,
+                keypoints,
+                &trial_base,
+                &mut trial_q,
+                below,
+                delta_m,
+                options,
+            );
+        }
+        iterations += refine(
+            body,
+            keypoints,
+            &mut trial_base,
+            &mut trial_q,
+            band0,
+            &refine_options,
+        );
+        let trial_score = score(&trial_base, &trial_q);
+        if trial_score > best {
+            best = trial_score;
+            *q = trial_q;
+            *world_from_root = trial_base;
+        }
+    }
+    iterations
+}
+
+/// `world_from_root` turned about `axis` (root frame) to the orientation nearest `towards`'s:
+/// the turn a base that looks the same at every angle about its first joint cannot show.
+fn turned_towards(
+    world_from_root: &Isometry3<f64>,
+    towards: &Isometry3<f64>,
+    axis: &JointAxis,
+) -> Isometry3<f64> {
+    let wanted = world_from_root.rotation.inverse() * towards.rotation;
+    let direction = axis.axis.normalize();
+    let angle = 2.0
+        * wanted
+            .quaternion()
+            .vector()
+            .dot(&direction)
+            .atan2(wanted.quaternion().w);
+    let about = Translation3::from(axis.origin.coords);
+    *world_from_root * about * UnitQuaternion::from_scaled_axis(direction * angle) * about.inverse()
+}
+
+/// Scan points (of `sample`) within `band` of the surfaces of `links`.
+fn coverage(
+    body: &ArticulatedBody,
+    sample: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    links: &[usize],
+    band: f64,
+    parallel: bool,
+) -> i64 {
+    let placed = Placed::new(body, world_from_root, q);
+    if parallel {
+        sample
+            .par_iter()
+            .map(|p| placed.evidence(p, band, band, links))
+            .sum()
+    } else {
+        sample
+            .iter()
+            .map(|p| placed.evidence(p, band, band, links))
+            .sum()
+    }
+}
+
+/// Iterations of the refinement of the decided links after each joint of the beam search.
+const SETTLE_ITERATIONS: usize = 6;
+
+/// Points the beam scores its states on (a stride sample of the coarse keypoints).
+const BEAM_SCORE_POINTS: usize = 4000;
+
+/// The joints searched down the tree from each base hypothesis, keeping the `beam_width`
+/// states whose decided links (those every joint above has been searched for) explain the
+/// most scan points: a joint whose best value is wrong only because a link below it is still
+/// far off survives as a runner-up until the links below decide. Each surviving state is then
+/// refined, and the one explaining the most points wins.
+fn beam_search(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    hypotheses: &[Isometry3<f64>],
+    q0: &[f64],
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> (Isometry3<f64>, Vec<f64>) {
+    let width = options.beam_width.max(1);
+    let stride = keypoints.len().div_ceil(BEAM_SCORE_POINTS).max(1);
+    let sample: Vec<Point3<f64>> = keypoints.iter().step_by(stride).copied().collect();
+    let band = 3.0 * options.voxel_m;
+    let with_surface: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.links()[l].surface.is_some())
+        .collect();
+    let mut beam: Vec<(Isometry3<f64>, Vec<f64>)> =
+        hypotheses.iter().map(|h| (*h, q0.to_vec())).collect();
+    let mut searched: Vec<usize> = Vec::new();
+    for parameter in search_order(body) {
+        let mut next = Vec::new();
+        for (base, q) in &beam {
+            for candidate in
+                joint_candidates(body, keypoints, base, q, parameter, delta_m, options, width)
+            {
+                let mut q = q.clone();
+                q[parameter] = candidate.value;
+                if let Some((partner, value)) = candidate.partner {
+                    q[partner] = value;
+                }
+                next.push((*base, q));
+            }
+        }
+        if next.is_empty() {
+            continue;
+        }
+        searched.push(parameter);
+        let decided: Vec<usize> = with_surface
+            .iter()
+            .copied()
+            .filter(|&l| body.movers(l).iter().all(|p| searched.contains(p)))
+            .collect();
+        let settle = RobotFitOptions {
+            max_iterations: SETTLE_ITERATIONS,
+            ..options.clone()
+        };
+        let settle_band = 2.0 * band;
+        let mut scored: Vec<(i64, Isometry3<f64>, Vec<f64>)> = next
+            .into_iter()
+            .map(|(mut base, mut q)| {
+                if settle.max_iterations > 0 {
+                    refine_links(
+                        body,
+                        &sample,
+                        &mut base,
+                        &mut q,
+                        settle_band,
+                        &settle,
+                        &decided,
+                        SETTLE_DAMPING,
+                    );
+                }
+                (
+                    coverage(body, &sample, &base, &q, &decided, band, options.parallel),
+                    base,
+                    q,
+                )
+            })
+            .collect();
+        scored.sort_by_key(|s| std::cmp::Reverse(s.0));
+        // Keep distinct states only: two hypotheses that reached the same configuration
+        // would spend the beam twice.
+        beam.clear();
+        for (_, base, q) in scored {
+            let same = beam.iter().any(|(b, other): &(Isometry3<f64>, Vec<f64>)| {
+                (b.translation.vector - base.translation.vector).norm() < options.voxel_m
+                    && b.rotation.angle_to(&base.rotation) < 1e-3
+                    && other.iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-3)
+            });
+            if !same {
+                beam.push((base, q));
+            }
+            if beam.len() == width {
+                break;
+            }
+        }
+    }
+    if beam.len() == 1 {
+        return beam.pop().expect("one state");
+    }
+    let refine_options = RobotFitOptions {
+        max_iterations: 15,
+        ..options.clone()
+    };
+    let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+    beam.into_iter()
+        .map(|(mut base, mut q)| {
+            refine(body, keypoints, &mut base, &mut q, band0, &refine_options);
+            let score = coverage(
+                body,
+                &sample,
+                &base,
+                &q,
+                &with_surface,
+                band,
+                options.parallel,
+            );
+            (score, base, q)
+        })
+        .max_by_key(|(score, _, _)| *score)
+        .map(|(_, base, q)| (base, q))
+        .expect("the beam is never empty")
+}
+
+/// A value for a searched joint (and for its partner when it spins its own links in place),
+/// with how many scan points its links explain.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    value: f64,
+    partner: Option<(usize, f64)>,
+    score: i64,
+}
+
+/// Links whose pose `parameter` decides once the joints above are known: those it is the
+/// last joint of.
+fn own_links(body: &ArticulatedBody, parameter: usize) -> Vec<usize> {
+    body.moved_by(parameter)
+        .into_iter()
+        .filter(|&link| body.movers(link).last() == Some(&parameter))
+        .collect()
+}
+
+/// Sets `q[parameter]` (and its partner's value) to the best candidate of [`joint_candidates`].
 fn search_joint(
     body: &ArticulatedBody,
     keypoints: &[Point3<f64>],
@@ -533,11 +962,46 @@ fn search_joint(
     delta_m: f64,
     options: &RobotFitOptions,
 ) {
+    if let Some(best) = joint_candidates(
+        body,
+        keypoints,
+        world_from_root,
+        q,
+        parameter,
+        delta_m,
+        options,
+        1,
+    )
+    .first()
+    {
+        q[parameter] = best.value;
+        if let Some((partner, value)) = best.partner {
+            q[partner] = value;
+        }
+    }
+}
+
+/// Values of `q[parameter]` whose links explain the most scan points that the other links do
+/// not (points buried inside a link count against it), searching a window that `delta_m`
+/// allows around the current value (coarse grid, then a finer one around each of the best
+/// `count` local maxima), best first. A joint that spins its own links in place is searched
+/// together with the next joint, whose links are the only ones that show its value.
+#[allow(clippy::too_many_arguments)]
+fn joint_candidates(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    parameter: usize,
+    delta_m: f64,
+    options: &RobotFitOptions,
+    count: usize,
+) -> Vec<Candidate> {
     let moved = body.moved_by(parameter);
     let placed = Placed::new(body, world_from_root, q);
     let Some((window, origin)) = Window::new(body, &placed, parameter, delta_m, options.voxel_m)
     else {
-        return;
+        return Vec::new();
     };
     let others: Vec<usize> = (0..body.links().len())
         .filter(|link| !moved.contains(link))
@@ -554,7 +1018,7 @@ fn search_joint(
         .copied()
         .collect();
     if nearby.is_empty() {
-        return;
+        return Vec::new();
     }
     let partner = if spins_in_place(body, &placed, parameter, options.min_observability) {
         child_parameter(body, parameter).and_then(|child| {
@@ -566,33 +1030,33 @@ fn search_joint(
     // The coarse level only has to find the right basin: a sample of the points does.
     let stride = nearby.len().div_ceil(COARSE_SEARCH_POINTS);
     let sample: Vec<Point3<f64>> = nearby.iter().step_by(stride).copied().collect();
-    let count = |trial: &[f64], band: f64, points: &[Point3<f64>]| {
+    let fine_stride = nearby.len().div_ceil(FINE_SEARCH_POINTS);
+    let fine: Vec<Point3<f64>> = nearby.iter().step_by(fine_stride).copied().collect();
+    let count_points = |trial: &[f64], band: f64, points: &[Point3<f64>]| -> i64 {
         let placed = Placed::new(body, world_from_root, trial);
         points
             .iter()
-            .filter(|p| placed.supports(p, band, &moved))
-            .count()
+            .map(|p| placed.evidence(p, band, coarse_band, &moved))
+            .sum()
     };
     let current = q[parameter];
-    let mut centre = current;
-    let mut half = window.half;
-    let mut partner_value = partner.as_ref().map(|w| q[w.parameter]);
     // Coarse steps move the farthest point by about a coarse voxel or more, at most 24 of them.
     let coarse_steps = ((2.0 * window.sweep_m() / coarse_band).ceil() as usize).clamp(4, 24);
-    for (level, steps) in [coarse_steps, 8].into_iter().enumerate() {
-        let step = 2.0 * half / steps as f64;
-        let band = (step * window.reach_m).max(coarse_band);
-        let candidates = window.grid(body, centre, half, steps);
-        let score = |value: f64| -> (usize, Option<f64>) {
+    let score_grid = |candidates: &[f64],
+                      band: f64,
+                      partner_value: Option<f64>,
+                      coarse: bool|
+     -> Vec<(i64, Option<f64>)> {
+        let score = |value: f64| -> (i64, Option<f64>) {
             let mut trial = q.to_vec();
             trial[parameter] = value;
-            match (&partner, level) {
-                (Some(partner), 0) => partner
+            match (&partner, coarse) {
+                (Some(partner), true) => partner
                     .grid(body, q[partner.parameter], partner.half, 8)
                     .into_iter()
                     .map(|child| {
                         trial[partner.parameter] = child;
-                        (count(&trial, band, &sample), Some(child))
+                        (count_points(&trial, band, &sample), Some(child))
                     })
                     .max_by_key(|(score, _)| *score)
                     .unwrap_or((0, None)),
@@ -600,31 +1064,78 @@ fn search_joint(
                     if let (Some(partner), Some(value)) = (&partner, partner_value) {
                         trial[partner.parameter] = value;
                     }
-                    let points = if level == 0 { &sample } else { &nearby };
-                    (count(&trial, band, points), partner_value)
+                    let points = if coarse { &sample } else { &fine };
+                    (count_points(&trial, band, points), partner_value)
                 }
             }
         };
-        let scores: Vec<(usize, Option<f64>)> = if options.parallel {
+        if options.parallel {
             candidates.par_iter().map(|&v| score(v)).collect()
         } else {
             candidates.iter().map(|&v| score(v)).collect()
-        };
-        // Ties (a symmetric link) go to the value nearest the current one: never invent motion.
-        if let Some((&best, &(_, child))) = candidates.iter().zip(&scores).max_by(|a, b| {
-            a.1.0
-                .cmp(&b.1.0)
-                .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
-        }) {
-            centre = best;
-            partner_value = child;
         }
-        half = step;
+    };
+    // Ties (a symmetric link) go to the value nearest the current one: never invent motion.
+    let better = |a: &(f64, i64), b: &(f64, i64)| {
+        a.1.cmp(&b.1)
+            .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
+    };
+    let coarse_step = 2.0 * window.half / coarse_steps as f64;
+    let coarse_values = window.grid(body, current, window.half, coarse_steps);
+    let band = (coarse_step * window.reach_m).max(coarse_band);
+    let coarse_scores = score_grid(&coarse_values, band, None, true);
+    // Local maxima of the coarse scores, best first.
+    let mut peaks: Vec<usize> = (0..coarse_values.len())
+        .filter(|&i| {
+            let left = i.checked_sub(1).map_or(i64::MIN, |l| coarse_scores[l].0);
+            let right = coarse_scores.get(i + 1).map_or(i64::MIN, |r| r.0);
+            coarse_scores[i].0 > 0 && coarse_scores[i].0 >= left && coarse_scores[i].0 >= right
+        })
+        .collect();
+    peaks.sort_by(|&a, &b| {
+        better(
+            &(coarse_values[b], coarse_scores[b].0),
+            &(coarse_values[a], coarse_scores[a].0),
+        )
+    });
+    let best_coarse = peaks.first().map_or(0, |&i| coarse_scores[i].0);
+    peaks.retain(|&i| 2 * coarse_scores[i].0 >= best_coarse);
+    peaks.truncate(count.max(1));
+    let mut candidates: Vec<Candidate> = peaks
+        .into_iter()
+        .map(|peak| {
+            let centre = coarse_values[peak];
+            let partner_value = coarse_scores[peak].1;
+            let steps = 8;
+            let fine_step = 2.0 * coarse_step / steps as f64;
+            let values = window.grid(body, centre, coarse_step, steps);
+            let band = (fine_step * window.reach_m).max(coarse_band);
+            let scores = score_grid(&values, band, partner_value, false);
+            let (value, score) = values
+                .iter()
+                .zip(&scores)
+                .map(|(&v, &(score, _))| (v, score))
+                .max_by(better)
+                .unwrap_or((centre, 0));
+            Candidate {
+                value,
+                partner: partner
+                    .as_ref()
+                    .zip(partner_value)
+                    .map(|(w, v)| (w.parameter, v)),
+                score,
+            }
+        })
+        .collect();
+    if candidates.is_empty() {
+        candidates.push(Candidate {
+            value: current,
+            partner: None,
+            score: 0,
+        });
     }
-    q[parameter] = centre;
-    if let (Some(partner), Some(value)) = (&partner, partner_value) {
-        q[partner.parameter] = value;
-    }
+    candidates.sort_by(|a, b| better(&(b.value, b.score), &(a.value, a.score)));
+    candidates
 }
 
 /// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.
@@ -637,28 +1148,89 @@ fn refine(
     options: &RobotFitOptions,
 ) -> usize {
     let all: Vec<usize> = (0..body.links().len()).collect();
+    refine_links(
+        body,
+        keypoints,
+        world_from_root,
+        q,
+        band0,
+        options,
+        &all,
+        REFINE_DAMPING,
+    )
+}
+
+/// Damping of the refinement's normal equations, relative to their largest diagonal entry.
+const REFINE_DAMPING: f64 = 1e-6;
+/// Damping while the beam search settles the links decided so far: much stronger, because
+/// some of their motions are not constrained yet (the first joint and the base's turn about it
+/// while every decided link is round about that axis) and must not wander until a link below
+/// shows them.
+const SETTLE_DAMPING: f64 = 1e-3;
+
+/// [`refine`] on the surfaces of `links` only, with `damping` (relative to the largest
+/// diagonal entry): joints that move none of them keep their values.
+#[allow(clippy::too_many_arguments)]
+fn refine_links(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &mut Isometry3<f64>,
+    q: &mut [f64],
+    band0: f64,
+    options: &RobotFitOptions,
+    all: &[usize],
+    damping: f64,
+) -> usize {
     let n = 6 + q.len();
-    let shrink_iterations = 10;
+    let shrink_iterations = options.max_iterations.min(10);
     let mut iterations = 0;
     let mut still = 0;
+    // Once the band is fixed, correspondences switching between links or in and out of the
+    // band can make Gauss-Newton cycle around the optimum by a few tenths of a millimetre
+    // without ever taking a step below the tolerance: the cost then stops falling, and the
+    // best state seen is kept.
+    let mut best: Option<(f64, Isometry3<f64>, Vec<f64>)> = None;
+    let mut without_progress = 0;
     while iterations < options.max_iterations {
         let fraction = (iterations as f64 / shrink_iterations as f64).min(1.0);
         let band = options.band_min_m
             + (band0 - options.band_min_m) * (fraction * std::f64::consts::FRAC_PI_2).cos();
         iterations += 1;
         let placed = Placed::new(body, world_from_root, q);
-        let matches = correspond(&placed, keypoints, band, &all, options.parallel);
+        let matches = correspond(&placed, keypoints, band, all, options.parallel);
         if matches.len() < 6 {
             break;
         }
+        let total_weight: f64 = matches.iter().map(|m| m.weight).sum();
+        if fraction >= 1.0 {
+            let cost = matches
+                .iter()
+                .map(|m| m.weight * m.distance * m.distance)
+                .sum::<f64>()
+                / total_weight;
+            match &best {
+                Some((best_cost, _, _)) if cost >= best_cost * (1.0 - COST_PROGRESS) => {
+                    without_progress += 1;
+                    if without_progress >= 3 {
+                        break;
+                    }
+                }
+                _ => without_progress = 0,
+            }
+            if best
+                .as_ref()
+                .is_none_or(|(best_cost, _, _)| cost < *best_cost)
+            {
+                best = Some((cost, *world_from_root, q.to_vec()));
+            }
+        }
         let scale = placed_radius(&placed);
         let (normal, rhs) = normal_equations(body, &placed, &matches, scale);
-        let Some(step) = solve_damped(normal.clone(), rhs) else {
+        let Some(step) = solve_damped(normal.clone(), rhs, damping) else {
             break;
         };
         // How far the step moves the points along their normals (RMS): motions no point
         // constrains (a symmetric link's spin) do not count.
-        let total_weight: f64 = matches.iter().map(|m| m.weight).sum();
         let normal_motion = step.dot(&(&normal * &step)).max(0.0) / total_weight;
         let normal_motion_m = normal_motion.sqrt();
         let omega = Vector3::new(step[0], step[1], step[2]) / scale;
@@ -680,11 +1252,18 @@ fn refine(
             0
         };
         if fraction >= 1.0 && still >= 2 {
-            break;
+            return iterations;
         }
+    }
+    if let Some((_, best_pose, best_q)) = best {
+        *world_from_root = best_pose;
+        q.copy_from_slice(&best_q);
     }
     iterations
 }
+
+/// The refinement counts an iteration as progress when it lowers the cost by this fraction.
+const COST_PROGRESS: f64 = 1e-3;
 
 fn placed_radius(placed: &Placed) -> f64 {
     let root = placed.poses[placed.body.root()] * Point3::origin();
@@ -739,12 +1318,12 @@ fn normal_equations(
 
 /// Solves the normal equations with a little damping, so that a direction no point constrains
 /// (a symmetric link's spin, a link nobody sees) stays where it is instead of blowing up.
-fn solve_damped(mut normal: DMatrix<f64>, rhs: DVector<f64>) -> Option<DVector<f64>> {
+fn solve_damped(mut normal: DMatrix<f64>, rhs: DVector<f64>, damping: f64) -> Option<DVector<f64>> {
     let largest = (0..normal.nrows())
         .map(|i| normal[(i, i)])
         .fold(0.0, f64::max);
     for i in 0..normal.nrows() {
-        normal[(i, i)] += largest * 1e-6 + 1e-12;
+        normal[(i, i)] += largest * damping + 1e-12;
     }
     Some(normal.cholesky()?.solve(&rhs))
 }
