@@ -101,6 +101,25 @@ fn random_configurations_of_both_robots_recover_every_visible_link_to_a_millimet
     }
 }
 
+/// Starts half a metre off: the base by up to 0.5 m and about 0.5 rad, every joint moving its
+/// farthest point by up to 0.5 m (the wrists by up to half a turn). The beam search, the
+/// proximal base candidates and the half-turn check are what recover these.
+#[test]
+fn starts_half_a_metre_off_recover_every_visible_link_to_a_millimetre() {
+    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+        for seed in [21, 22] {
+            let (worst, report) = recover(
+                robot,
+                &robot.home(),
+                &RobotScanOptions::default(),
+                0.5,
+                seed,
+            );
+            assert!(worst < 1e-3, "{} seed {seed}: {report:?}", robot.name());
+        }
+    }
+}
+
 #[test]
 fn a_link_no_scanner_sees_is_reported_and_its_joint_kept_at_the_start() {
     let robot = ShippedRobot::Iiwa14;

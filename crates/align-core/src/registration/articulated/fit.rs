@@ -1400,3 +1400,39 @@ fn observed_parameters(
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_base_turned_about_its_first_axis_takes_the_start_angle_and_keeps_the_axis() {
+        // The first joint's axis in the root frame: vertical, through (0.1, 0, 0).
+        let axis = JointAxis {
+            origin: Point3::new(0.1, 0.0, 0.0),
+            axis: Vector3::z(),
+            prismatic: false,
+        };
+        let start = Isometry3::from_parts(
+            Translation3::new(0.5, -0.2, 0.0),
+            UnitQuaternion::from_euler_angles(0.05, 0.0, 0.3),
+        );
+        // A candidate at the right place, tilted a little differently and turned 2 rad about
+        // the axis.
+        let candidate = Isometry3::from_parts(
+            Translation3::new(0.52, -0.21, 0.01),
+            UnitQuaternion::from_euler_angles(0.02, 0.01, 0.3),
+        ) * Isometry3::translation(0.1, 0.0, 0.0)
+            * Isometry3::rotation(Vector3::z() * 2.0)
+            * Isometry3::translation(-0.1, 0.0, 0.0);
+        let turned = turned_towards(&candidate, &start, &axis);
+        // Points on the axis stay where they were.
+        for height in [0.0, 0.3] {
+            let on_axis = Point3::new(0.1, 0.0, height);
+            assert!((turned * on_axis - candidate * on_axis).norm() < 1e-12);
+        }
+        // The turn left is the tilt only (about 0.03 rad), not the 2 rad about the axis.
+        assert!(turned.rotation.angle_to(&start.rotation) < 0.05);
+        assert!(candidate.rotation.angle_to(&start.rotation) > 1.9);
+    }
+}
