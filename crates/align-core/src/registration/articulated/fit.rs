@@ -1187,10 +1187,10 @@ fn refine_links(
     let mut still = 0;
     // Once the band is fixed, correspondences switching between links or in and out of the
     // band can make Gauss-Newton cycle around the optimum by a few tenths of a millimetre
-    // without ever taking a step below the tolerance: the cost then stops falling, and the
-    // best state seen is kept.
+    // without two steps in a row below the tolerance: a refinement that runs out of
+    // iterations ends at the state whose points carried the most weight (the robust kernel's
+    // objective; a mean residual would favour states that push points out of the band).
     let mut best: Option<(f64, Isometry3<f64>, Vec<f64>)> = None;
-    let mut without_progress = 0;
     while iterations < options.max_iterations {
         let fraction = (iterations as f64 / shrink_iterations as f64).min(1.0);
         let band = options.band_min_m
@@ -1202,27 +1202,12 @@ fn refine_links(
             break;
         }
         let total_weight: f64 = matches.iter().map(|m| m.weight).sum();
-        if fraction >= 1.0 {
-            let cost = matches
-                .iter()
-                .map(|m| m.weight * m.distance * m.distance)
-                .sum::<f64>()
-                / total_weight;
-            match &best {
-                Some((best_cost, _, _)) if cost >= best_cost * (1.0 - COST_PROGRESS) => {
-                    without_progress += 1;
-                    if without_progress >= 3 {
-                        break;
-                    }
-                }
-                _ => without_progress = 0,
-            }
-            if best
+        if fraction >= 1.0
+            && best
                 .as_ref()
-                .is_none_or(|(best_cost, _, _)| cost < *best_cost)
-            {
-                best = Some((cost, *world_from_root, q.to_vec()));
-            }
+                .is_none_or(|(best_weight, _, _)| total_weight > *best_weight)
+        {
+            best = Some((total_weight, *world_from_root, q.to_vec()));
         }
         let scale = placed_radius(&placed);
         let (normal, rhs) = normal_equations(body, &placed, &matches, scale);
@@ -1261,9 +1246,6 @@ fn refine_links(
     }
     iterations
 }
-
-/// The refinement counts an iteration as progress when it lowers the cost by this fraction.
-const COST_PROGRESS: f64 = 1e-3;
 
 fn placed_radius(placed: &Placed) -> f64 {
     let root = placed.poses[placed.body.root()] * Point3::origin();
