@@ -786,7 +786,8 @@ fn turned_towards(
     *world_from_root * about * UnitQuaternion::from_scaled_axis(direction * angle) * about.inverse()
 }
 
-/// Scan points (of `sample`) within `band` of the surfaces of `links`.
+/// How well `links` explain `sample`: points within `band` of their surfaces count +1, points
+/// buried deeper than `band` inside one count -2 (see [`Placed::evidence`]).
 fn coverage(
     body: &ArticulatedBody,
     sample: &[Point3<f64>],
