@@ -85,6 +85,13 @@ impl Default for RobotFitOptions {
     }
 }
 
+impl RobotFitOptions {
+    /// The band a refinement starts from, before it shrinks to `band_min_m`.
+    fn refine_band0_m(&self) -> f64 {
+        (3.0 * self.band_min_m).max(self.voxel_m * 6.0)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RobotFitError {
     #[error("the cloud is empty")]
@@ -361,7 +368,7 @@ pub fn align_robot(
     ));
     let (mut world_from_root, mut q) =
         beam_search(body, &coarse, &hypotheses, q0, delta_m, options);
-    let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+    let band0 = options.refine_band0_m();
     let mut iterations = refine(
         body,
         &coarse,
@@ -503,12 +510,7 @@ impl Window {
         delta_m: f64,
         voxel_m: f64,
     ) -> Option<(Self, Point3<f64>)> {
-        let axes = body.axes(&placed.poses);
-        let (axis, _, _) = axes
-            .iter()
-            .flatten()
-            .find(|(_, p, _)| *p == parameter)
-            .copied()?;
+        let axis = axis_of(body, &placed.poses, parameter)?;
         let reach = reach_m(placed, &body.moved_by(parameter), &axis.origin).max(voxel_m);
         // The joint moves its farthest point by reach * dq: a window twice delta at that point
         // leaves room for the base's own error.
@@ -541,6 +543,19 @@ impl Window {
     }
 }
 
+/// Where the (first) joint driven by `parameter` turns or slides, with the links at `poses`.
+fn axis_of(
+    body: &ArticulatedBody,
+    poses: &[Isometry3<f64>],
+    parameter: usize,
+) -> Option<JointAxis> {
+    body.axes(poses)
+        .into_iter()
+        .flatten()
+        .find(|(_, p, _)| *p == parameter)
+        .map(|(axis, _, _)| axis)
+}
+
 /// True when turning `parameter` does not move its own links (those no deeper joint moves)
 /// along their normals: a cylinder spinning about its axis. Its value then shows only through
 /// the links beyond the next joint.
@@ -553,13 +568,7 @@ fn spins_in_place(
     if body.parameters()[parameter].prismatic {
         return false;
     }
-    let axes = body.axes(&placed.poses);
-    let Some((axis, _, _)) = axes
-        .iter()
-        .flatten()
-        .find(|(_, p, _)| *p == parameter)
-        .copied()
-    else {
+    let Some(axis) = axis_of(body, &placed.poses, parameter) else {
         return false;
     };
     turns_in_place(
@@ -650,13 +659,7 @@ fn proximal_candidates(
         DISTINCT_BASE_M,
     );
     let root_poses = body.link_poses(&Isometry3::identity(), q0);
-    let axis = first.and_then(|first| {
-        body.axes(&root_poses)
-            .into_iter()
-            .flatten()
-            .find(|(_, p, _)| *p == first)
-            .map(|(axis, _, _)| axis)
-    });
+    let axis = first.and_then(|first| axis_of(body, &root_poses, first));
     let fixed: Vec<usize> = (0..body.links().len())
         .filter(|&l| body.movers(l).is_empty())
         .collect();
@@ -712,7 +715,7 @@ fn flip_check(
         max_iterations: 20,
         ..options.clone()
     };
-    let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+    let band0 = options.refine_band0_m();
     for (index, &parameter) in order.iter().enumerate() {
         let info = &body.parameters()[parameter];
         if info.prismatic {
@@ -915,7 +918,7 @@ fn beam_search(
         max_iterations: 15,
         ..options.clone()
     };
-    let band0 = (3.0 * options.band_min_m).max(options.voxel_m * 6.0);
+    let band0 = options.refine_band0_m();
     beam.into_iter()
         .map(|(mut base, mut q)| {
             refine(body, keypoints, &mut base, &mut q, band0, &refine_options);
