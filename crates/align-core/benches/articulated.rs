@@ -1,5 +1,6 @@
 //! Hierarchical alignment of a whole robot (UR10, iiwa14) in a cluttered 20k-point scan from a
-//! start 100 mm off.
+//! start 100 mm off; and preparing the robot for it (`ArticulatedBody::from_model`: link
+//! surfaces and their distance grids), which a service does once per robot model.
 //! Run: cargo bench -p align-core --bench articulated
 
 use std::hint::black_box;
@@ -42,7 +43,11 @@ fn articulated(c: &mut Criterion) {
         .sample_size(20)
         .measurement_time(Duration::from_secs(20));
     for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
-        let body = ArticulatedBody::from_model(&robot.model().expect("shipped")).expect("surfaces");
+        let model = robot.model().expect("shipped");
+        group.bench_function(format!("{}_prepare_body", robot.name()), |b| {
+            b.iter(|| black_box(ArticulatedBody::from_model(&model).expect("surfaces")))
+        });
+        let body = ArticulatedBody::from_model(&model).expect("surfaces");
         let cloud = scan_of_about(&body, &truth, &robot.home(), 20_000);
         let mut rng = TrialRng::new(9);
         let (start, q0) = perturb_robot(&body, &truth, &robot.home(), 0.1, &mut rng);

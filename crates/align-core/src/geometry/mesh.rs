@@ -55,6 +55,8 @@ pub struct Mesh {
     notes: Vec<String>,
     centroid: Point3<f64>,
     radius_m: f64,
+    /// Axis-aligned bounds in the mesh frame (parry recomputes them on every call).
+    bounds: (Point3<f64>, Point3<f64>),
 }
 
 fn to_glam(p: &Point3<f64>) -> GlamVector {
@@ -143,12 +145,18 @@ impl Mesh {
             .iter()
             .map(|v| (from_glam(*v) - centroid.coords).norm())
             .fold(0.0, f64::max);
+        let aabb = trimesh.local_aabb();
+        let bounds = (
+            Point3::from(from_glam(aabb.mins)),
+            Point3::from(from_glam(aabb.maxs)),
+        );
         Ok(Self {
             trimesh,
             watertight,
             notes,
             centroid,
             radius_m,
+            bounds,
         })
     }
 
@@ -229,11 +237,7 @@ impl Mesh {
 
     /// Axis-aligned bounds (min, max) in the mesh frame.
     pub fn bounds(&self) -> (Point3<f64>, Point3<f64>) {
-        let aabb = self.trimesh.local_aabb();
-        (
-            Point3::from(from_glam(aabb.mins)),
-            Point3::from(from_glam(aabb.maxs)),
-        )
+        self.bounds
     }
 
     /// The closest surface point to `query` (mesh frame), its outward normal and signed distance.

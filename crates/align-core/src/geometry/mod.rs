@@ -1,7 +1,9 @@
 //! Geometry the alignment works on: triangle meshes with closest-point, normal and signed-distance
 //! queries ([`Mesh`]), built on parry3d's BVH (glam types stay inside this module).
 
+mod distance_grid;
 mod mesh;
 pub mod shapes;
 
+pub use distance_grid::DistanceGrid;
 pub use mesh::{Mesh, MeshError, SurfacePoint};

@@ -4,8 +4,8 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
-use crate::geometry::Mesh;
 use crate::geometry::shapes::{box_soup, capsule_soup, cylinder_soup, sphere_soup};
+use crate::geometry::{DistanceGrid, Mesh};
 use crate::io::{TriangleSoup, read_mesh};
 use crate::kinematics::{Geometry, JointKind, RobotModel, Shape};
 
@@ -25,6 +25,11 @@ pub enum BodyError {
     NoGeometry { robot: String },
 }
 
+/// Cell and margin of the links' distance grids: the searches ask about bands up to
+/// 18 mm (three 6 mm keypoint voxels), which a 30 mm margin answers from 5 mm cells.
+const GRID_CELL_M: f64 = 0.005;
+const GRID_MARGIN_M: f64 = 0.03;
+
 /// A joint as the fit moves it.
 #[derive(Debug, Clone)]
 pub(crate) struct BodyJoint {
@@ -42,6 +47,8 @@ pub(crate) struct BodyJoint {
 pub struct BodyLink {
     pub name: String,
     pub surface: Option<Mesh>,
+    /// The surface's signed distance on a grid, for the searches' near/inside questions.
+    pub(crate) grid: Option<DistanceGrid>,
     /// The joint whose child this link is (`None` for the root).
     pub(crate) parent_joint: Option<usize>,
 }
@@ -141,9 +148,13 @@ impl ArticulatedBody {
                 reason,
             })?;
             let parent_joint = model.joints().iter().position(|joint| joint.child == index);
+            let grid = surface
+                .as_ref()
+                .map(|mesh| DistanceGrid::new(mesh, GRID_CELL_M, GRID_MARGIN_M));
             links.push(BodyLink {
                 name: link.name.clone(),
                 surface,
+                grid,
                 parent_joint,
             });
         }

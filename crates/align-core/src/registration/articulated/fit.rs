@@ -2,9 +2,10 @@
 //! pose and the joint values, each link constrained by its parent.
 //!
 //! 1. Base hypotheses: the whole robot at the start joints aligned as one rigid part with Point
-//!    Cloud Alignment (its filters, weights, schedule and exploration); and, when the start may
-//!    be off by more than the base is big, the best few rigid alignments of the proximal links
-//!    (the base and what only the first joint moves), which do not depend on the other joints.
+//!    Cloud Alignment (its filters, weights, schedule and exploration); and, when delta exceeds
+//!    three quarters of the proximal links' radius, the best few rigid alignments of the
+//!    proximal links (the base and what only the first joint moves), which do not depend on
+//!    the other joints.
 //! 2. Down the tree, a beam search: each joint's value by a 1-D search (coarse grid, then fine
 //!    around each of the best local maxima) scored by how many scan points the links it moves
 //!    explain (points buried inside a link count against it), with everything above it fixed. A
@@ -15,11 +16,17 @@
 //!    still far off survives as a runner-up until those links decide.
 //! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
 //!    cos-weighted points within a band that shrinks to `band_min_m`, each point assigned to
-//!    its nearest link surface; the joints are searched once more near the answer and refined
-//!    on every keypoint (`search_passes`).
+//!    its nearest link surface; the joints are searched once more near the answer
+//!    (`search_passes`).
 //! 4. Half turns: a joint whose window allows it is tried turned by pi with the joints below it
 //!    searched again (a spherical wrist reaches the same poses as (a + pi, -b, c + pi)), and
 //!    kept when the robot then explains more of the scan.
+//! 5. Last, the same steps on every keypoint against the exact link surfaces.
+//!
+//! The searches and every refinement but the last ask each link's signed-distance grid (5 mm
+//! cells, built once with the [`ArticulatedBody`]) instead of its mesh: a few memory reads
+//! instead of a BVH descent, with a millimetre of blur at edges that the last refinement, on
+//! the exact surfaces, removes.
 //!
 //! Nothing is invented: a joint whose links hold too few points, or whose motion the points do
 //! not constrain (a cylinder turning about its own axis), keeps its start value and is reported.
@@ -47,8 +54,8 @@ pub struct RobotFitOptions {
     pub search_passes: usize,
     /// States the first search down the tree keeps at each joint.
     pub beam_width: usize,
-    /// Further base poses the search starts from when the start may be off by more than the
-    /// base is big: rigid alignments of the base and the links only the first joint moves.
+    /// Further base poses the search starts from when the start may be off by about as much as
+    /// the base is big: rigid alignments of the base and the links only the first joint moves.
     pub base_candidates: usize,
     pub max_iterations: usize,
     /// The refinement stops when a step moves the points along their normals by less than this
@@ -57,6 +64,8 @@ pub struct RobotFitOptions {
     pub parallel: bool,
     /// The rigid first alignment of the whole robot.
     pub base: PcaOptions,
+    /// The exploration for rigid alignments of the proximal links (`base_candidates`).
+    pub proximal: PcaOptions,
 }
 
 impl Default for RobotFitOptions {
@@ -69,13 +78,27 @@ impl Default for RobotFitOptions {
             search_passes: 2,
             beam_width: 6,
             base_candidates: 4,
-            max_iterations: 60,
+            // The last refinement starts within the narrow band and takes a handful when the
+            // correspondences settle; when they cycle (sparse clouds, at the 0.1 mm level) it
+            // keeps the best of 25.
+            max_iterations: 25,
             // A tenth of a millimetre: a tenth of the success bar, below the scan's noise.
             tolerance_m: 1e-4,
             parallel: true,
-            // 15 mm keypoints and a short schedule: the rigid stage only has to bring the base
-            // near, the joints are still wrong while it runs (so it need not converge either).
+            // 20 mm keypoints, a short schedule and a loose stop (half a millimetre over five
+            // iterations): the rigid stage only has to bring the base near; the joints are
+            // still wrong while it runs, so it cannot converge closer than that and would only
+            // run to its limit. (30 mm keypoints lost an iiwa14 at 100 mm: seed 7, trial 8.)
             base: PcaOptions {
+                voxel_m: 0.02,
+                schedule_iterations: 40,
+                max_iterations: 60,
+                tolerance_m: 5e-4,
+                window: 5,
+                ..PcaOptions::default()
+            },
+            // The proximal links are small: 15 mm keypoints (45 mm for the exploration).
+            proximal: PcaOptions {
                 voxel_m: 0.015,
                 schedule_iterations: 40,
                 max_iterations: 60,
@@ -163,34 +186,98 @@ struct Placed<'a> {
     body: &'a ArticulatedBody,
     poses: Vec<Isometry3<f64>>,
     inverse: Vec<Isometry3<f64>>,
+    /// False: [`Placed::nearest`] takes the surface point and normal from the links' distance
+    /// grids (a millimetre of blur at edges, no edge rejection) where they answer the band.
+    exact: bool,
+    /// Each link surface's bounding sphere in the world (centre, radius), for a quick "too far".
+    spheres: Vec<Option<(Point3<f64>, f64)>>,
 }
 
 impl<'a> Placed<'a> {
     fn new(body: &'a ArticulatedBody, world_from_root: &Isometry3<f64>, q: &[f64]) -> Self {
         let poses = body.link_poses(world_from_root, q);
         let inverse = poses.iter().map(|p| p.inverse()).collect();
+        let spheres = body
+            .links()
+            .iter()
+            .zip(&poses)
+            .map(|(link, pose)| {
+                let surface = link.surface.as_ref()?;
+                Some((pose * surface.centroid(), surface.radius_m()))
+            })
+            .collect();
         Self {
             body,
             poses,
             inverse,
+            exact: true,
+            spheres,
         }
+    }
+
+    /// False when `point` is farther than `band` from every point of `link`'s surface.
+    fn within_reach(&self, point: &Point3<f64>, link: usize, band: f64) -> bool {
+        self.spheres[link].is_some_and(|(centre, radius)| {
+            (point - centre).norm_squared() <= (radius + band) * (radius + band)
+        })
     }
 
     /// The nearest surface of `links` within `band` of `point`.
     fn nearest(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> Option<Match> {
         let mut best: Option<Match> = None;
         for &link in links {
-            let Some(surface) = &self.body.links()[link].surface else {
+            let body_link = &self.body.links()[link];
+            let Some(surface) = &body_link.surface else {
                 continue;
             };
+            let limit = best.map_or(band, |b| b.distance);
+            if !self.within_reach(point, link, limit) {
+                continue;
+            }
             let local = self.inverse[link] * point;
+            if let Some(grid) = &body_link.grid {
+                let reliable = grid.reliable_m();
+                let value = grid.distance_and_gradient(&local);
+                if !self.exact {
+                    match value {
+                        Some((signed, gradient)) if signed.abs() < reliable => {
+                            let distance = signed.abs();
+                            if let (true, Some(normal)) =
+                                (distance < limit, gradient.try_normalize(1e-9))
+                            {
+                                best = Some(Match {
+                                    point: *point,
+                                    surface: self.poses[link] * (local - normal * signed),
+                                    normal: self.poses[link].rotation * normal,
+                                    distance,
+                                    weight: (distance / band * std::f64::consts::FRAC_PI_2).cos(),
+                                    link,
+                                });
+                            }
+                            continue;
+                        }
+                        // Beyond what the grid answers: farther than the band, or the exact
+                        // query below for a band wider than the grid.
+                        _ if limit <= reliable => continue,
+                        _ => {}
+                    }
+                } else if limit <= reliable {
+                    // The grid's value is within a cell diagonal of the true distance (a
+                    // distance field changes by at most the distance moved) while that is
+                    // within the margin: beyond that it rules the link out without the
+                    // exact query.
+                    let slack = grid.cell_m() * 3f64.sqrt();
+                    if value.is_none_or(|(signed, _)| signed.abs() > limit + slack) {
+                        continue;
+                    }
+                }
+            }
             let (lower, upper) = surface.bounds();
             let inside_box =
                 (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band);
             if !inside_box {
                 continue;
             }
-            let limit = best.map_or(band, |b| b.distance);
             let Some(closest) = surface.closest_point_within(&local, limit) else {
                 continue;
             };
@@ -221,10 +308,28 @@ impl<'a> Placed<'a> {
     fn evidence(&self, point: &Point3<f64>, band: f64, inside_m: f64, links: &[usize]) -> i64 {
         let mut buried = false;
         for &link in links {
-            let Some(surface) = &self.body.links()[link].surface else {
+            let body_link = &self.body.links()[link];
+            let Some(surface) = &body_link.surface else {
                 continue;
             };
+            // Nothing beyond the band outside the bounding sphere is near or inside the link.
+            if !self.within_reach(point, link, band) {
+                continue;
+            }
             let local = self.inverse[link] * point;
+            if let Some(grid) = body_link
+                .grid
+                .as_ref()
+                .filter(|g| band.max(inside_m) <= g.reliable_m())
+            {
+                match grid.signed_distance_m(&local) {
+                    Some(distance) if distance > band => {}
+                    Some(distance) if distance >= -inside_m => return 1,
+                    Some(_) => buried = true,
+                    None => {}
+                }
+                continue;
+            }
             let (lower, upper) = surface.bounds();
             if !(0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band) {
                 continue;
@@ -249,10 +354,19 @@ impl<'a> Placed<'a> {
     /// Whether `point` lies within `band` of the surface of one of `links`.
     fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
         links.iter().any(|&link| {
-            let Some(surface) = &self.body.links()[link].surface else {
+            let body_link = &self.body.links()[link];
+            let Some(surface) = &body_link.surface else {
                 return false;
             };
+            if !self.within_reach(point, link, band) {
+                return false;
+            }
             let local = self.inverse[link] * point;
+            if let Some(grid) = body_link.grid.as_ref().filter(|g| band <= g.reliable_m()) {
+                return grid
+                    .signed_distance_m(&local)
+                    .is_some_and(|distance| distance.abs() <= band);
+            }
             let (lower, upper) = surface.bounds();
             (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band)
                 && surface.closest_point_within(&local, band).is_some()
@@ -368,21 +482,25 @@ pub fn align_robot(
     ));
     let (mut world_from_root, mut q) =
         beam_search(body, &coarse, &hypotheses, q0, delta_m, options);
+    // Until the last refinement the surfaces come from the links' distance grids: a
+    // millimetre of blur at edges costs nothing while the joints are still being searched.
     let band0 = options.refine_band0_m();
+    let coarse_refine = RobotFitOptions {
+        max_iterations: 15,
+        ..options.clone()
+    };
     let mut iterations = refine(
         body,
         &coarse,
         &mut world_from_root,
         &mut q,
         band0,
-        &RobotFitOptions {
-            max_iterations: 15,
-            ..options.clone()
-        },
+        &coarse_refine,
+        false,
     );
     // Again with every joint near: a joint searched while the links below it were far off is
-    // searched once more, then all are refined on every keypoint.
-    for pass in 1..options.search_passes.max(1) {
+    // searched once more.
+    for _ in 1..options.search_passes.max(1) {
         for parameter in search_order(body) {
             search_joint(
                 body,
@@ -394,26 +512,34 @@ pub fn align_robot(
                 options,
             );
         }
-        let last = pass + 1 == options.search_passes;
         iterations += refine(
             body,
-            if last { &keypoints } else { &coarse },
+            &coarse,
             &mut world_from_root,
             &mut q,
             band0,
-            &RobotFitOptions {
-                max_iterations: if last { options.max_iterations } else { 15 },
-                ..options.clone()
-            },
+            &coarse_refine,
+            false,
         );
     }
     iterations += flip_check(
         body,
-        &keypoints,
+        &coarse,
         &mut world_from_root,
         &mut q,
         delta_m,
         options,
+    );
+    // Last, every keypoint against the exact surfaces, in the narrow band the refinements
+    // before ended in (the state is within it).
+    iterations += refine(
+        body,
+        &keypoints,
+        &mut world_from_root,
+        &mut q,
+        options.band_min_m,
+        options,
+        true,
     );
     let placed = Placed::new(body, &world_from_root, &q);
     let all: Vec<usize> = (0..body.links().len()).collect();
@@ -644,17 +770,23 @@ fn proximal_candidates(
     let Some(mesh) = body.rigid_mesh_of(q0, &proximal) else {
         return Vec::new();
     };
-    // The root moves by up to about twice delta (the robot turns about its centroid).
-    let root_bound_m = 2.0 * delta_m;
-    if root_bound_m <= mesh.radius_m() {
+    // For small deltas the whole robot's rigid alignment finds the proximal links' place; for
+    // larger ones the other links, still at the wrong joint values, may pull it away. Where
+    // the line lies was measured (seed 7, 10-20 trials per delta, without these candidates):
+    // every trial succeeded at delta / radius 0.49 and 0.73 (iiwa14, radius 205 mm) and 0.70,
+    // 1.05 and 1.40 (UR10, 143 mm); one in ten failed at 0.98 (iiwa14) and three in twenty
+    // at 2.1 (UR10).
+    if delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
         return Vec::new();
     }
+    // The root moves by up to about twice delta (the robot turns about its centroid).
+    let root_bound_m = 2.0 * delta_m;
     let candidates = pose_candidates(
         &mesh,
         cloud,
         world_from_root_start,
         root_bound_m,
-        &options.base,
+        &options.proximal,
         options.base_candidates,
         DISTINCT_BASE_M,
     );
@@ -676,6 +808,10 @@ fn proximal_candidates(
         _ => candidates,
     }
 }
+
+/// Proximal candidates are searched when delta exceeds this fraction of the proximal links'
+/// radius (see [`proximal_candidates`]).
+const PROXIMAL_DELTA_PER_RADIUS: f64 = 0.75;
 
 /// Base candidates closer than this (thesis pose distance) are one.
 const DISTINCT_BASE_M: f64 = 0.05;
@@ -759,6 +895,7 @@ fn flip_check(
             &mut trial_q,
             band0,
             &refine_options,
+            false,
         );
         let trial_score = score(&trial_base, &trial_q);
         if trial_score > best {
@@ -818,7 +955,21 @@ fn coverage(
 const SETTLE_ITERATIONS: usize = 6;
 
 /// Points the beam scores its states on (a stride sample of the coarse keypoints).
-const BEAM_SCORE_POINTS: usize = 4000;
+const BEAM_SCORE_POINTS: usize = 3000;
+
+/// Values of a joint the beam search follows from each of its states (the best local maxima).
+const PEAKS_PER_STATE: usize = 3;
+
+/// Two search states closer than a keypoint voxel (base) and a milliradian (every joint).
+fn same_state(
+    a: &(Isometry3<f64>, Vec<f64>),
+    b: &(Isometry3<f64>, Vec<f64>),
+    options: &RobotFitOptions,
+) -> bool {
+    (a.0.translation.vector - b.0.translation.vector).norm() < options.voxel_m
+        && a.0.rotation.angle_to(&b.0.rotation) < 1e-3
+        && a.1.iter().zip(&b.1).all(|(x, y)| (x - y).abs() < 1e-3)
+}
 
 /// The joints searched down the tree from each base hypothesis, keeping the `beam_width`
 /// states whose decided links (those every joint above has been searched for) explain the
@@ -846,15 +997,22 @@ fn beam_search(
     for parameter in search_order(body) {
         let mut next = Vec::new();
         for (base, q) in &beam {
+            let peaks = width.min(PEAKS_PER_STATE);
             for candidate in
-                joint_candidates(body, keypoints, base, q, parameter, delta_m, options, width)
+                joint_candidates(body, keypoints, base, q, parameter, delta_m, options, peaks)
             {
                 let mut q = q.clone();
                 q[parameter] = candidate.value;
                 if let Some((partner, value)) = candidate.partner {
                     q[partner] = value;
                 }
-                next.push((*base, q));
+                // States that reached the same configuration are settled once.
+                if !next
+                    .iter()
+                    .any(|other| same_state(other, &(*base, q.clone()), options))
+                {
+                    next.push((*base, q));
+                }
             }
         }
         if next.is_empty() {
@@ -884,6 +1042,7 @@ fn beam_search(
                         &settle,
                         &decided,
                         SETTLE_DAMPING,
+                        false,
                     );
                 }
                 (
@@ -898,13 +1057,9 @@ fn beam_search(
         // would spend the beam twice.
         beam.clear();
         for (_, base, q) in scored {
-            let same = beam.iter().any(|(b, other): &(Isometry3<f64>, Vec<f64>)| {
-                (b.translation.vector - base.translation.vector).norm() < options.voxel_m
-                    && b.rotation.angle_to(&base.rotation) < 1e-3
-                    && other.iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-3)
-            });
-            if !same {
-                beam.push((base, q));
+            let state = (base, q);
+            if !beam.iter().any(|other| same_state(other, &state, options)) {
+                beam.push(state);
             }
             if beam.len() == width {
                 break;
@@ -914,14 +1069,23 @@ fn beam_search(
     if beam.len() == 1 {
         return beam.pop().expect("one state");
     }
+    // Enough to rank the survivors: the winner is refined on every coarse keypoint next.
     let refine_options = RobotFitOptions {
-        max_iterations: 15,
+        max_iterations: 8,
         ..options.clone()
     };
     let band0 = options.refine_band0_m();
     beam.into_iter()
         .map(|(mut base, mut q)| {
-            refine(body, keypoints, &mut base, &mut q, band0, &refine_options);
+            refine(
+                body,
+                &sample,
+                &mut base,
+                &mut q,
+                band0,
+                &refine_options,
+                false,
+            );
             let score = coverage(
                 body,
                 &sample,
@@ -1150,6 +1314,7 @@ fn refine(
     q: &mut [f64],
     band0: f64,
     options: &RobotFitOptions,
+    exact: bool,
 ) -> usize {
     let all: Vec<usize> = (0..body.links().len()).collect();
     refine_links(
@@ -1161,6 +1326,7 @@ fn refine(
         options,
         &all,
         REFINE_DAMPING,
+        exact,
     )
 }
 
@@ -1184,9 +1350,15 @@ fn refine_links(
     options: &RobotFitOptions,
     all: &[usize],
     damping: f64,
+    exact: bool,
 ) -> usize {
     let n = 6 + q.len();
-    let shrink_iterations = options.max_iterations.min(10);
+    // A refinement that starts in the narrow band has nothing to shrink.
+    let shrink_iterations = if band0 > options.band_min_m {
+        options.max_iterations.min(10)
+    } else {
+        0
+    };
     let mut iterations = 0;
     let mut still = 0;
     // Once the band is fixed, correspondences switching between links or in and out of the
@@ -1196,11 +1368,16 @@ fn refine_links(
     // objective; a mean residual would favour states that push points out of the band).
     let mut best: Option<(f64, Isometry3<f64>, Vec<f64>)> = None;
     while iterations < options.max_iterations {
-        let fraction = (iterations as f64 / shrink_iterations as f64).min(1.0);
+        let fraction = if shrink_iterations == 0 {
+            1.0
+        } else {
+            (iterations as f64 / shrink_iterations as f64).min(1.0)
+        };
         let band = options.band_min_m
             + (band0 - options.band_min_m) * (fraction * std::f64::consts::FRAC_PI_2).cos();
         iterations += 1;
-        let placed = Placed::new(body, world_from_root, q);
+        let mut placed = Placed::new(body, world_from_root, q);
+        placed.exact = exact;
         let matches = correspond(&placed, keypoints, band, all, options.parallel);
         if matches.len() < 6 {
             break;
