@@ -54,6 +54,11 @@ fn recover(
             worst = worst.max(error);
         }
     }
+    // Both shipped robots stand on round bases: the first joint, and only it, is flagged as
+    // observed only together with the base's yaw.
+    let flagged: Vec<bool> = fit.joints.iter().map(|j| j.turns_with_base).collect();
+    assert_eq!(flagged[0], fit.joints[0].observed, "{:?}", fit.joints);
+    assert!(!flagged[1..].iter().any(|f| *f), "{:?}", fit.joints);
     eprintln!(
         "{} seed {seed} delta {delta_m}: {:.3} s, {report:?}, joints {:?}",
         robot.name(),

@@ -61,6 +61,9 @@ pub struct JointJson {
     /// False: the scan did not constrain the joint (its links unseen, or a symmetric link
     /// turning about its own axis); the value is the start value.
     pub observed: bool,
+    /// True for the first joint above a round base: the scan fixes the base's yaw about the
+    /// joint's axis plus the joint's value, not each; the split is the start's.
+    pub turns_with_base: bool,
 }
 
 /// DESIGN.md 6.4 keys, plus `joints`, `rms`, `iterations`, `cloud_points`.
@@ -133,6 +136,7 @@ pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {
                 name: joint.name.clone(),
                 value: joint.value,
                 observed: joint.observed,
+                turns_with_base: joint.turns_with_base,
             })
             .collect(),
         rms: fit.rms_m,
@@ -154,10 +158,12 @@ impl AlignRobotOutput {
                 "  {:<24} {:>11.6}{}\n",
                 joint.name,
                 crate::display_round(joint.value, 6),
-                if joint.observed {
-                    ""
-                } else {
+                if !joint.observed {
                     "  (not observed: start value kept)"
+                } else if joint.turns_with_base {
+                    "  (round base: only base yaw + this value is observed)"
+                } else {
+                    ""
                 }
             );
         }

@@ -133,6 +133,14 @@ fn the_shipped_ur10_is_found_in_a_cluttered_scan() {
     assert_eq!(result["q"].as_array().unwrap().len(), 6);
     assert_eq!(result["links"].as_array().unwrap().len(), 7);
     assert!(result["time_s"].as_f64().unwrap() > 0.0);
+    // The UR10's round base: the shoulder pan is observed only together with the base's yaw.
+    let flags: Vec<bool> = result["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["turns_with_base"].as_bool().unwrap())
+        .collect();
+    assert_eq!(flags, [true, false, false, false, false, false], "{result}");
 }
 
 #[test]
@@ -183,6 +191,13 @@ fn a_robot_with_mesh_links_and_a_prismatic_joint_is_found() {
     let joints = result["joints"].as_array().unwrap();
     assert!(
         joints.iter().all(|j| j["observed"].as_bool().unwrap()),
+        "{result}"
+    );
+    // A box base shows its yaw: no joint shares it.
+    assert!(
+        joints
+            .iter()
+            .all(|j| !j["turns_with_base"].as_bool().unwrap()),
         "{result}"
     );
 }

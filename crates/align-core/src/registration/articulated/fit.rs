@@ -157,6 +157,11 @@ pub struct JointFit {
     pub value: f64,
     /// False when the scan did not constrain the joint: its value is the start value.
     pub observed: bool,
+    /// True for the first joint of a robot whose base looks the same at every angle about the
+    /// joint's axis (a round base): the scan fixes the base's turn about that axis plus the
+    /// joint's value, not each. The links are placed right either way; the split between base
+    /// yaw and joint value is the start's (a controller's joint reading settles it).
+    pub turns_with_base: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -557,15 +562,20 @@ pub fn align_robot(
             q[parameter] = q0[parameter];
         }
     }
+    let with_base = round_base_axis(body, q0, options)
+        .and(search_order(body).first().copied())
+        .filter(|&first| observed[first]);
     let joints = body
         .parameters()
         .iter()
         .zip(&q)
         .zip(&observed)
-        .map(|((parameter, &value), &observed)| JointFit {
+        .enumerate()
+        .map(|(index, ((parameter, &value), &observed))| JointFit {
             name: parameter.name.clone(),
             value,
             observed,
+            turns_with_base: with_base == Some(index),
         })
         .collect();
     let sum: f64 = matches.iter().map(|m| m.distance * m.distance).sum();
@@ -790,23 +800,31 @@ fn proximal_candidates(
         options.base_candidates,
         DISTINCT_BASE_M,
     );
+    match round_base_axis(body, q0, options) {
+        Some(axis) => candidates
+            .iter()
+            .map(|c| turned_towards(c, world_from_root_start, &axis))
+            .collect(),
+        None => candidates,
+    }
+}
+
+/// The first joint's axis (root frame) when the links no joint moves look the same at every
+/// angle about it (a round base): the scan then shows the base's turn about that axis and the
+/// joint's value only as their sum.
+fn round_base_axis(
+    body: &ArticulatedBody,
+    q0: &[f64],
+    options: &RobotFitOptions,
+) -> Option<JointAxis> {
+    let first = *search_order(body).first()?;
     let root_poses = body.link_poses(&Isometry3::identity(), q0);
-    let axis = first.and_then(|first| axis_of(body, &root_poses, first));
+    let axis = axis_of(body, &root_poses, first)?;
     let fixed: Vec<usize> = (0..body.links().len())
         .filter(|&l| body.movers(l).is_empty())
         .collect();
-    match axis {
-        Some(axis)
-            if !axis.prismatic
-                && turns_in_place(body, &root_poses, &fixed, &axis, options.min_observability) =>
-        {
-            candidates
-                .iter()
-                .map(|c| turned_towards(c, world_from_root_start, &axis))
-                .collect()
-        }
-        _ => candidates,
-    }
+    (!axis.prismatic && turns_in_place(body, &root_poses, &fixed, &axis, options.min_observability))
+        .then_some(axis)
 }
 
 /// Proximal candidates are searched when delta exceeds this fraction of the proximal links'
