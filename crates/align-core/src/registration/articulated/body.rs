@@ -213,6 +213,16 @@ impl ArticulatedBody {
         &self.links
     }
 
+    /// The same body with no distance grids: every query goes to the meshes.
+    #[cfg(test)]
+    pub(crate) fn without_grids(&self) -> Self {
+        let mut body = self.clone();
+        for link in &mut body.links {
+            link.grid = None;
+        }
+        body
+    }
+
     pub fn parameters(&self) -> &[BodyParameter] {
         &self.parameters
     }
