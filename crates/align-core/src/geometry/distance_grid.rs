@@ -22,16 +22,25 @@ pub struct DistanceGrid {
 }
 
 impl DistanceGrid {
+    /// How many samples [`DistanceGrid::new`] would take (and store, 4 bytes each).
+    pub fn sample_count(mesh: &Mesh, cell_m: f64, margin_m: f64) -> usize {
+        Self::dims(mesh, cell_m, margin_m).iter().product()
+    }
+
+    fn dims(mesh: &Mesh, cell_m: f64, margin_m: f64) -> [usize; 3] {
+        let (low, high) = mesh.bounds();
+        [0, 1, 2].map(|a| ((high[a] - low[a] + 2.0 * margin_m) / cell_m).ceil() as usize + 1)
+    }
+
     /// Samples `mesh` every `cell_m` over its bounds grown by `margin_m` (both > 0).
     pub fn new(mesh: &Mesh, cell_m: f64, margin_m: f64) -> Self {
         assert!(
             cell_m > 0.0 && margin_m > 0.0,
             "cell and margin must be > 0"
         );
-        let (low, high) = mesh.bounds();
+        let (low, _) = mesh.bounds();
         let lower = low - Vector3::repeat(margin_m);
-        let dims =
-            [0, 1, 2].map(|a| ((high[a] - low[a] + 2.0 * margin_m) / cell_m).ceil() as usize + 1);
+        let dims = Self::dims(mesh, cell_m, margin_m);
         let slab = dims[1] * dims[2];
         let mut values = vec![0f32; dims[0] * slab];
         let watertight = mesh.is_watertight();

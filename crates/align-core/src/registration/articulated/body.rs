@@ -29,6 +29,10 @@ pub enum BodyError {
 /// 18 mm (three 6 mm keypoint voxels), which a 30 mm margin answers from 5 mm cells.
 const GRID_CELL_M: f64 = 0.005;
 const GRID_MARGIN_M: f64 = 0.03;
+/// A link bigger than this many grid samples (16 MB, a box of about 0.8 m x 0.8 m x 0.8 m)
+/// gets no grid: its queries go to its mesh, slower but exact, rather than spend seconds and
+/// memory on a grid (a gantry beam, a table modelled as a link).
+const MAX_GRID_SAMPLES: usize = 4_000_000;
 
 /// A joint as the fit moves it.
 #[derive(Debug, Clone)]
@@ -150,6 +154,9 @@ impl ArticulatedBody {
             let parent_joint = model.joints().iter().position(|joint| joint.child == index);
             let grid = surface
                 .as_ref()
+                .filter(|mesh| {
+                    DistanceGrid::sample_count(mesh, GRID_CELL_M, GRID_MARGIN_M) <= MAX_GRID_SAMPLES
+                })
                 .map(|mesh| DistanceGrid::new(mesh, GRID_CELL_M, GRID_MARGIN_M));
             links.push(BodyLink {
                 name: link.name.clone(),
@@ -462,6 +469,21 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_link_too_big_for_a_grid_keeps_its_mesh_only() {
+        let urdf = r#"<robot name="gantry">
+            <link name="beam"><visual><geometry><box size="6 0.3 0.3"/></geometry></visual></link>
+            <link name="carriage"><visual><geometry><box size="0.2 0.2 0.1"/></geometry></visual></link>
+            <joint name="travel" type="prismatic"><parent link="beam"/><child link="carriage"/>
+              <origin xyz="0 0 0.2"/><axis xyz="1 0 0"/>
+              <limit lower="-2.8" upper="2.8" effort="1" velocity="1"/></joint>
+        </robot>"#;
+        let model = RobotModel::from_urdf_str(urdf, &Default::default()).unwrap();
+        let body = ArticulatedBody::from_model(&model).unwrap();
+        assert!(body.links()[0].surface.is_some() && body.links()[0].grid.is_none());
+        assert!(body.links()[1].grid.is_some());
     }
 
     #[test]
