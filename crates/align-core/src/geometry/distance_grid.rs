@@ -23,8 +23,12 @@ pub struct DistanceGrid {
 
 impl DistanceGrid {
     /// How many samples [`DistanceGrid::new`] would take (and store, 4 bytes each).
+    /// `usize::MAX` when that does not fit in one (a mesh in the wrong unit, kilometres long).
     pub fn sample_count(mesh: &Mesh, cell_m: f64, margin_m: f64) -> usize {
-        Self::dims(mesh, cell_m, margin_m).iter().product()
+        Self::dims(mesh, cell_m, margin_m)
+            .iter()
+            .try_fold(1usize, |count, &d| count.checked_mul(d))
+            .unwrap_or(usize::MAX)
     }
 
     fn dims(mesh: &Mesh, cell_m: f64, margin_m: f64) -> [usize; 3] {
@@ -185,5 +189,13 @@ mod tests {
         // Flat faces are exact; the blur is where the field bends, near edges and corners.
         assert!(worst < 0.0025, "worst {worst}");
         assert!(grid.reliable_m() > 0.02);
+    }
+
+    #[test]
+    fn a_mesh_kilometres_long_counts_as_too_many_samples_not_an_overflow() {
+        let huge = Mesh::cuboid([4e6, 4e6, 4e6]).unwrap();
+        assert_eq!(DistanceGrid::sample_count(&huge, 0.005, 0.03), usize::MAX);
+        let cube = Mesh::cuboid([0.1, 0.1, 0.1]).unwrap();
+        assert_eq!(DistanceGrid::sample_count(&cube, 0.005, 0.03), 33 * 33 * 33);
     }
 }
