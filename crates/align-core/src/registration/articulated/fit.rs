@@ -88,7 +88,7 @@ impl Default for RobotFitOptions {
             // 20 mm keypoints, a short schedule and a loose stop (half a millimetre over five
             // iterations): the rigid stage only has to bring the base near; the joints are
             // still wrong while it runs, so it cannot converge closer than that and would only
-            // run to its limit. (30 mm keypoints lost an iiwa14 at 100 mm: seed 7, trial 8.)
+            // run to its limit. (30 mm keypoints lost an iiwa14 at 100 mm in exploratory runs.)
             base: PcaOptions {
                 voxel_m: 0.02,
                 schedule_iterations: 40,
@@ -476,6 +476,7 @@ pub fn align_robot(
         }
         None => *world_from_root_start,
     };
+    let round_base = round_base_axis(body, q0, options);
     let mut hypotheses = vec![whole];
     hypotheses.extend(proximal_candidates(
         body,
@@ -483,6 +484,7 @@ pub fn align_robot(
         world_from_root_start,
         q0,
         delta_m,
+        round_base.as_ref(),
         options,
     ));
     let (mut world_from_root, mut q) =
@@ -562,7 +564,7 @@ pub fn align_robot(
             q[parameter] = q0[parameter];
         }
     }
-    let with_base = round_base_axis(body, q0, options)
+    let with_base = round_base
         .and(search_order(body).first().copied())
         .filter(|&first| observed[first]);
     let joints = body
@@ -768,6 +770,7 @@ fn proximal_candidates(
     world_from_root_start: &Isometry3<f64>,
     q0: &[f64],
     delta_m: f64,
+    round_base: Option<&JointAxis>,
     options: &RobotFitOptions,
 ) -> Vec<Isometry3<f64>> {
     if options.base_candidates == 0 {
@@ -781,11 +784,10 @@ fn proximal_candidates(
         return Vec::new();
     };
     // For small deltas the whole robot's rigid alignment finds the proximal links' place; for
-    // larger ones the other links, still at the wrong joint values, may pull it away. Where
-    // the line lies was measured (seed 7, 10-20 trials per delta, without these candidates):
-    // every trial succeeded at delta / radius 0.49 and 0.73 (iiwa14, radius 205 mm) and 0.70,
-    // 1.05 and 1.40 (UR10, 143 mm); one in ten failed at 0.98 (iiwa14) and three in twenty
-    // at 2.1 (UR10).
+    // larger ones the other links, still at the wrong joint values, may pull it away. The line
+    // was set from exploratory runs without these candidates (not kept in the repo), where
+    // failures began near delta = radius; the trial table (docs/articulated-trials.md, 50
+    // trials per delta on both robots) is the check.
     if delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
         return Vec::new();
     }
@@ -800,10 +802,10 @@ fn proximal_candidates(
         options.base_candidates,
         DISTINCT_BASE_M,
     );
-    match round_base_axis(body, q0, options) {
+    match round_base {
         Some(axis) => candidates
             .iter()
-            .map(|c| turned_towards(c, world_from_root_start, &axis))
+            .map(|c| turned_towards(c, world_from_root_start, axis))
             .collect(),
         None => candidates,
     }
