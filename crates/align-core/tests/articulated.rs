@@ -125,6 +125,25 @@ fn starts_half_a_metre_off_recover_every_visible_link_to_a_millimetre() {
     }
 }
 
+/// Starts a metre off, beyond the robots' radius: the base by up to 1 m and about 1.6 rad,
+/// every joint anywhere in a window of up to a half turn each way. Nothing is local any more:
+/// the proximal links are detected by point pair features and each joint is searched with its
+/// child on a fine grid. Configurations away from home, so that nothing here is the trials'
+/// scene.
+#[test]
+fn starts_a_metre_off_recover_every_visible_link_to_a_millimetre() {
+    let mut rng = TrialRng::new(41);
+    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+        let q_true = random_configuration(robot, &mut rng);
+        let scan = RobotScanOptions {
+            seed: 141,
+            ..RobotScanOptions::default()
+        };
+        let (worst, report) = recover(robot, &q_true, &scan, 1.0, 31);
+        assert!(worst < 1e-3, "{}: {report:?}", robot.name());
+    }
+}
+
 #[test]
 fn a_link_no_scanner_sees_is_reported_and_its_joint_kept_at_the_start() {
     let robot = ShippedRobot::Iiwa14;

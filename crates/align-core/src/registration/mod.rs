@@ -9,6 +9,7 @@
 pub mod articulated;
 pub mod convergence;
 pub mod pca;
+pub mod ppf;
 pub mod psa;
 pub mod sampling;
 pub mod svd;

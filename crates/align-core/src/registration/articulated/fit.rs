@@ -23,6 +23,15 @@
 //!    kept when the robot then explains more of the scan.
 //! 5. Last, the same steps on every keypoint against the exact link surfaces.
 //!
+//! When delta exceeds the robot's radius (at the start joints) the start is not local: the
+//! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
+//! half turn. Two stages then change. The proximal links are detected anywhere the root may be
+//! by point pair features ([`crate::registration::ppf`]) instead of slid into place from the
+//! start; and each joint is searched together with its child on a grid fine enough that the
+//! value nearest the truth puts their links within the band, scored only on the links those
+//! two place (a joint whose two links turn in place about it, an upper arm standing on the
+//! axis of a round shoulder, is searched after its child, together with its grandchild).
+//!
 //! The searches and every refinement but the last ask each link's signed-distance grid (5 mm
 //! cells, built once with the [`ArticulatedBody`]) instead of its mesh: a few memory reads
 //! instead of a BVH descent, with a millimetre of blur at edges that the last refinement, on
@@ -38,6 +47,7 @@ use rayon::prelude::*;
 
 use super::body::{ArticulatedBody, JointAxis};
 use crate::registration::pca::{PcaError, PcaOptions, align_cloud, pose_candidates};
+use crate::registration::ppf::{PpfOptions, ppf_poses};
 use crate::registration::sampling::voxel_representatives;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -66,6 +76,10 @@ pub struct RobotFitOptions {
     pub base: PcaOptions,
     /// The exploration for rigid alignments of the proximal links (`base_candidates`).
     pub proximal: PcaOptions,
+    /// The detection of the proximal links anywhere near the start (point pair features),
+    /// which gives the base candidates instead when the start is not local (delta beyond the
+    /// robot's radius).
+    pub detection: PpfOptions,
 }
 
 impl Default for RobotFitOptions {
@@ -104,6 +118,7 @@ impl Default for RobotFitOptions {
                 max_iterations: 60,
                 ..PcaOptions::default()
             },
+            detection: PpfOptions::default(),
         }
     }
 }
@@ -468,9 +483,15 @@ pub fn align_robot(
     }
     let keypoints = voxel_representatives(&near, options.voxel_m);
     let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
-    let whole = match body.rigid_mesh(q0) {
+    let start_mesh = body.rigid_mesh(q0);
+    // Beyond the robot's own radius the start is no longer local: the robot may be turned by
+    // more than a radian and its joints anywhere in windows of up to a half turn each way.
+    let global = start_mesh
+        .as_ref()
+        .is_some_and(|mesh| delta_m > GLOBAL_DELTA_PER_RADIUS * mesh.radius_m());
+    let whole = match &start_mesh {
         Some(mesh) => {
-            align_cloud(&mesh, &near, world_from_root_start, delta_m, &options.base)
+            align_cloud(mesh, &near, world_from_root_start, delta_m, &options.base)
                 .map_err(RobotFitError::Base)?
                 .base_from_part
         }
@@ -484,11 +505,12 @@ pub fn align_robot(
         world_from_root_start,
         q0,
         delta_m,
+        global,
         round_base.as_ref(),
         options,
     ));
     let (mut world_from_root, mut q) =
-        beam_search(body, &coarse, &hypotheses, q0, delta_m, options);
+        beam_search(body, &coarse, &hypotheses, q0, delta_m, global, options);
     // Until the last refinement the surfaces come from the links' distance grids: a
     // millimetre of blur at edges costs nothing while the joints are still being searched.
     let band0 = options.refine_band0_m();
@@ -516,6 +538,7 @@ pub fn align_robot(
                 &mut q,
                 parameter,
                 delta_m,
+                global,
                 options,
             );
         }
@@ -535,6 +558,7 @@ pub fn align_robot(
         &mut world_from_root,
         &mut q,
         delta_m,
+        global,
         options,
     );
     // Last, every keypoint against the exact surfaces, in the narrow band the refinements
@@ -764,12 +788,14 @@ fn child_parameter(body: &ArticulatedBody, parameter: usize) -> Option<usize> {
 /// first joint moves) when the start may be off by more than they are big; none otherwise. A
 /// base that looks the same at every angle about the first joint is turned to the start's
 /// angle about it: the scan cannot tell, and the joints below start nearest their own values.
+#[allow(clippy::too_many_arguments)]
 fn proximal_candidates(
     body: &ArticulatedBody,
     cloud: &[Point3<f64>],
     world_from_root_start: &Isometry3<f64>,
     q0: &[f64],
     delta_m: f64,
+    global: bool,
     round_base: Option<&JointAxis>,
     options: &RobotFitOptions,
 ) -> Vec<Isometry3<f64>> {
@@ -793,15 +819,32 @@ fn proximal_candidates(
     }
     // The root moves by up to about twice delta (the robot turns about its centroid).
     let root_bound_m = 2.0 * delta_m;
-    let candidates = pose_candidates(
-        &mesh,
-        cloud,
-        world_from_root_start,
-        root_bound_m,
-        &options.proximal,
-        options.base_candidates,
-        DISTINCT_BASE_M,
-    );
+    // A start that is not local has nothing near it to slide into place from: the links are
+    // detected anywhere the root may be.
+    let candidates = if global {
+        ppf_poses(
+            &mesh,
+            cloud,
+            &(world_from_root_start * Point3::origin()),
+            root_bound_m,
+            &options.detection,
+            options.base_candidates,
+            DISTINCT_DETECTION_RAD,
+        )
+        .into_iter()
+        .map(|pose| pose.world_from_model)
+        .collect()
+    } else {
+        pose_candidates(
+            &mesh,
+            cloud,
+            world_from_root_start,
+            root_bound_m,
+            &options.proximal,
+            options.base_candidates,
+            DISTINCT_BASE_M,
+        )
+    };
     match round_base {
         Some(axis) => candidates
             .iter()
@@ -836,6 +879,10 @@ const PROXIMAL_DELTA_PER_RADIUS: f64 = 0.75;
 /// Base candidates closer than this (thesis pose distance) are one.
 const DISTINCT_BASE_M: f64 = 0.05;
 
+/// Detected base poses that turn the proximal links by less than this are one (and no closer
+/// than two detection steps).
+const DISTINCT_DETECTION_RAD: f64 = 0.3;
+
 /// Tries each revolute joint turned half a turn, with the joints below it searched again and
 /// everything refined, and keeps what explains the scan better. A wrist (or shoulder) whose
 /// three axes meet reaches the same link poses as (a + pi, -b, c + pi): continuous refinement
@@ -847,6 +894,7 @@ fn flip_check(
     world_from_root: &mut Isometry3<f64>,
     q: &mut Vec<f64>,
     delta_m: f64,
+    global: bool,
     options: &RobotFitOptions,
 ) -> usize {
     let with_surface: Vec<usize> = (0..body.links().len())
@@ -905,6 +953,7 @@ fn flip_check(
                 &mut trial_q,
                 below,
                 delta_m,
+                global,
                 options,
             );
         }
@@ -1002,6 +1051,7 @@ fn beam_search(
     hypotheses: &[Isometry3<f64>],
     q0: &[f64],
     delta_m: f64,
+    global: bool,
     options: &RobotFitOptions,
 ) -> (Isometry3<f64>, Vec<f64>) {
     let width = options.beam_width.max(1);
@@ -1018,13 +1068,18 @@ fn beam_search(
         let mut next = Vec::new();
         for (base, q) in &beam {
             let peaks = width.min(PEAKS_PER_STATE);
-            for candidate in
+            let candidates = if global {
+                global_joint_candidates(
+                    body, keypoints, base, q, parameter, delta_m, options, peaks,
+                )
+            } else {
                 joint_candidates(body, keypoints, base, q, parameter, delta_m, options, peaks)
-            {
+            };
+            for candidate in candidates {
                 let mut q = q.clone();
                 q[parameter] = candidate.value;
-                if let Some((partner, value)) = candidate.partner {
-                    q[partner] = value;
+                for (other, value) in candidate.partner.into_iter().chain(candidate.deferred) {
+                    q[other] = value;
                 }
                 // States that reached the same configuration are settled once.
                 if !next
@@ -1128,6 +1183,8 @@ fn beam_search(
 struct Candidate {
     value: f64,
     partner: Option<(usize, f64)>,
+    /// A further joint's value the search settled first (see [`global_joint_candidates`]).
+    deferred: Option<(usize, f64)>,
     score: i64,
 }
 
@@ -1140,7 +1197,9 @@ fn own_links(body: &ArticulatedBody, parameter: usize) -> Vec<usize> {
         .collect()
 }
 
-/// Sets `q[parameter]` (and its partner's value) to the best candidate of [`joint_candidates`].
+/// Sets `q[parameter]` (and its partner's value) to the best candidate of [`joint_candidates`]
+/// (of [`global_joint_candidates`] when the start is not local).
+#[allow(clippy::too_many_arguments)]
 fn search_joint(
     body: &ArticulatedBody,
     keypoints: &[Point3<f64>],
@@ -1148,23 +1207,36 @@ fn search_joint(
     q: &mut [f64],
     parameter: usize,
     delta_m: f64,
+    global: bool,
     options: &RobotFitOptions,
 ) {
-    if let Some(best) = joint_candidates(
-        body,
-        keypoints,
-        world_from_root,
-        q,
-        parameter,
-        delta_m,
-        options,
-        1,
-    )
-    .first()
-    {
+    let candidates = if global {
+        global_joint_candidates(
+            body,
+            keypoints,
+            world_from_root,
+            q,
+            parameter,
+            delta_m,
+            options,
+            1,
+        )
+    } else {
+        joint_candidates(
+            body,
+            keypoints,
+            world_from_root,
+            q,
+            parameter,
+            delta_m,
+            options,
+            1,
+        )
+    };
+    if let Some(best) = candidates.first() {
         q[parameter] = best.value;
-        if let Some((partner, value)) = best.partner {
-            q[partner] = value;
+        for (other, value) in best.partner.into_iter().chain(best.deferred) {
+            q[other] = value;
         }
     }
 }
@@ -1311,6 +1383,7 @@ fn joint_candidates(
                     .as_ref()
                     .zip(partner_value)
                     .map(|(w, v)| (w.parameter, v)),
+                deferred: None,
                 score,
             }
         })
@@ -1319,11 +1392,347 @@ fn joint_candidates(
         candidates.push(Candidate {
             value: current,
             partner: None,
+            deferred: None,
             score: 0,
         });
     }
     candidates.sort_by(|a, b| better(&(b.value, b.score), &(a.value, a.score)));
     candidates
+}
+
+/// The start is taken as not local when delta exceeds this fraction of the robot's radius at
+/// the start joints (see [`align_robot`]): turns of the whole robot by more than a radian.
+const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;
+
+/// Pairs of values (the searched joint's and its child's) a global joint search scores per
+/// state at its coarse level, at most.
+const GLOBAL_MAX_PAIRS: usize = 6000;
+
+/// Keypoints a global joint search scores on, at most (a stride sample of those in reach).
+const GLOBAL_SEARCH_POINTS: usize = 6000;
+
+/// [`joint_candidates`] for a start that is not local (every joint anywhere in a window of up
+/// to a half turn, the links below it too): the joint is searched together with its child, on
+/// a grid fine enough that the value nearest the truth puts their links within the band, and
+/// scored only on the links those two joints place. The links further down, at values still
+/// arbitrary, would otherwise score the joint by where they happen to lie (or be buried); and
+/// the wide band a coarse grid over a half turn needs cannot tell an arm in the air from one
+/// lying on the floor. When those links turn in place about the joint at the best pair (an
+/// upper arm standing on the axis of a round shoulder), the joint only shows through the
+/// grandchild's link: the child is searched first with the joint where it is, then the joint
+/// together with the grandchild.
+#[allow(clippy::too_many_arguments)]
+fn global_joint_candidates(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    parameter: usize,
+    delta_m: f64,
+    options: &RobotFitOptions,
+    count: usize,
+) -> Vec<Candidate> {
+    let local = || {
+        joint_candidates(
+            body,
+            keypoints,
+            world_from_root,
+            q,
+            parameter,
+            delta_m,
+            options,
+            count,
+        )
+    };
+    if body.parameters()[parameter].prismatic {
+        return local();
+    }
+    let placed = Placed::new(body, world_from_root, q);
+    let own = own_surfaces(body, parameter);
+    let child = revolute_child(body, &placed, parameter, delta_m, options);
+    let child_own = child
+        .as_ref()
+        .map_or(Vec::new(), |(w, _)| own_surfaces(body, w.parameter));
+    if own.is_empty() && child_own.is_empty() {
+        return local();
+    }
+    let (candidates, flat) = pair_search(
+        body,
+        keypoints,
+        world_from_root,
+        q,
+        parameter,
+        &own,
+        child.as_ref(),
+        &child_own,
+        delta_m,
+        options,
+        count,
+    );
+    let (Some((child_window, _)), Some(best)) = (&child, candidates.first()) else {
+        return candidates;
+    };
+    let mut at_best = q.to_vec();
+    at_best[parameter] = best.value;
+    if let Some((c, v)) = best.partner {
+        at_best[c] = v;
+    }
+    let poses = body.link_poses(world_from_root, &at_best);
+    let scored: Vec<usize> = own.iter().chain(&child_own).copied().collect();
+    let degenerate = flat
+        || axis_of(body, &poses, parameter).is_some_and(|axis| {
+            turns_in_place(body, &poses, &scored, &axis, options.min_observability)
+        });
+    if !degenerate {
+        return candidates;
+    }
+    // The child (with its own child) first, this joint where it is; then this joint with the
+    // grandchild, the child's links turning with this joint.
+    let mut trial = q.to_vec();
+    let child_parameter = child_window.parameter;
+    let child_child = revolute_child(body, &placed, child_parameter, delta_m, options);
+    let Some(child_best) = pair_search(
+        body,
+        keypoints,
+        world_from_root,
+        &trial,
+        child_parameter,
+        &child_own,
+        child_child.as_ref(),
+        &child_child
+            .as_ref()
+            .map_or(Vec::new(), |(w, _)| own_surfaces(body, w.parameter)),
+        delta_m,
+        options,
+        1,
+    )
+    .0
+    .into_iter()
+    .next() else {
+        return candidates;
+    };
+    trial[child_parameter] = child_best.value;
+    if let Some((c, v)) = child_best.partner {
+        trial[c] = v;
+    }
+    let at_child = Placed::new(body, world_from_root, &trial);
+    let grandchild = revolute_child(body, &at_child, child_parameter, delta_m, options);
+    let grandchild_own = grandchild
+        .as_ref()
+        .map_or(Vec::new(), |(w, _)| own_surfaces(body, w.parameter));
+    pair_search(
+        body,
+        keypoints,
+        world_from_root,
+        &trial,
+        parameter,
+        &scored,
+        grandchild.as_ref(),
+        &grandchild_own,
+        delta_m,
+        options,
+        count,
+    )
+    .0
+    .into_iter()
+    .map(|candidate| Candidate {
+        deferred: Some((child_parameter, child_best.value)),
+        ..candidate
+    })
+    .collect()
+}
+
+/// The links with geometry whose pose `parameter` decides last.
+fn own_surfaces(body: &ArticulatedBody, parameter: usize) -> Vec<usize> {
+    own_links(body, parameter)
+        .into_iter()
+        .filter(|&l| body.links()[l].surface.is_some())
+        .collect()
+}
+
+/// The window of the revolute joint right after `parameter`, with its axis origin.
+fn revolute_child(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    parameter: usize,
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> Option<(Window, Point3<f64>)> {
+    child_parameter(body, parameter)
+        .filter(|&c| !body.parameters()[c].prismatic)
+        .and_then(|c| Window::new(body, placed, c, delta_m, options.voxel_m))
+}
+
+/// The 2-D search of [`global_joint_candidates`]: `parameter` over its window and `partner`
+/// (a joint below it) over its own, scored on `rigid` (links that turn rigidly with
+/// `parameter`) and `partner_links` (those the partner places); best first, at most `count`.
+#[allow(clippy::too_many_arguments)]
+fn pair_search(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    parameter: usize,
+    rigid: &[usize],
+    partner: Option<&(Window, Point3<f64>)>,
+    partner_links: &[usize],
+    delta_m: f64,
+    options: &RobotFitOptions,
+    count: usize,
+) -> (Vec<Candidate>, bool) {
+    let placed = Placed::new(body, world_from_root, q);
+    let Some((window, origin)) = Window::new(body, &placed, parameter, delta_m, options.voxel_m)
+    else {
+        return (Vec::new(), false);
+    };
+    let scored: Vec<usize> = rigid.iter().chain(partner_links).copied().collect();
+    let band = 3.0 * options.voxel_m;
+    // Turning the joint keeps every point's distance from its axis origin; the partner's links
+    // stay within their reach of the partner's axis, wherever the joint puts that.
+    let partner_reach = partner.map_or(0.0, |(_, o)| reach_m(&placed, partner_links, o));
+    let reach = reach_m(&placed, rigid, &origin)
+        .max(partner.map_or(0.0, |(_, o)| (o - origin).norm() + partner_reach))
+        .max(options.voxel_m);
+    let moved = body.moved_by(parameter);
+    let others: Vec<usize> = (0..body.links().len())
+        .filter(|link| !moved.contains(link))
+        .collect();
+    let nearby: Vec<Point3<f64>> = keypoints
+        .iter()
+        .filter(|p| (*p - origin).norm() <= reach + band)
+        .filter(|p| !placed.supports(p, band, &others))
+        .copied()
+        .collect();
+    if nearby.is_empty() {
+        return (Vec::new(), false);
+    }
+    let stride = nearby.len().div_ceil(GLOBAL_SEARCH_POINTS);
+    let nearby: Vec<Point3<f64>> = nearby.into_iter().step_by(stride).collect();
+    // A step moves the farthest scored point by twice the band (fewer steps when the pairs
+    // would exceed the cap).
+    let motion = 2.0 * band;
+    let mut steps = ((2.0 * window.half * reach / motion).ceil() as usize).max(4);
+    let mut partner_steps = partner.map_or(1, |(w, _)| {
+        ((2.0 * w.half * partner_reach.max(options.voxel_m) / motion).ceil() as usize).max(4)
+    });
+    let shrink = (GLOBAL_MAX_PAIRS as f64 / (steps * partner_steps) as f64)
+        .sqrt()
+        .min(1.0);
+    steps = ((steps as f64 * shrink).ceil() as usize).max(4);
+    if partner.is_some() {
+        partner_steps = ((partner_steps as f64 * shrink).ceil() as usize).max(4);
+    }
+    let current = q[parameter];
+    // Ties (a symmetric link) go to the value nearest the current one: never invent motion.
+    let nearer = |a: f64, b: f64, to: f64| (b - to).abs().total_cmp(&(a - to).abs());
+    // The best partner value for `value` (none without a partner).
+    let score_value = |value: f64, partner_values: &[f64]| -> (i64, Option<f64>) {
+        let mut trial = q.to_vec();
+        trial[parameter] = value;
+        let at_value = Placed::new(body, world_from_root, &trial);
+        let partner_origin = partner
+            .and_then(|(w, _)| axis_of(body, &at_value.poses, w.parameter))
+            .map(|axis| axis.origin);
+        // Only points that can lie near a scored link at this value are counted.
+        let near_value: Vec<&Point3<f64>> = nearby
+            .iter()
+            .filter(|p| {
+                rigid.iter().any(|&l| at_value.within_reach(p, l, band))
+                    || partner_origin.is_some_and(|o| (*p - o).norm() <= partner_reach + band)
+            })
+            .collect();
+        let count_at = |trial: &[f64]| -> i64 {
+            let placed = Placed::new(body, world_from_root, trial);
+            near_value
+                .iter()
+                .map(|p| placed.evidence(p, band, band, &scored))
+                .sum()
+        };
+        match partner {
+            Some((w, _)) => {
+                let partner_current = q[w.parameter];
+                partner_values
+                    .iter()
+                    .map(|&c| {
+                        trial[w.parameter] = c;
+                        (count_at(&trial), c)
+                    })
+                    .max_by(|a, b| a.0.cmp(&b.0).then(nearer(a.1, b.1, partner_current)))
+                    .map_or((0, None), |(score, c)| (score, Some(c)))
+            }
+            None => (count_at(&trial), None),
+        }
+    };
+    let coarse_step = 2.0 * window.half / steps as f64;
+    let values = window.grid(body, current, window.half, steps);
+    let partner_coarse: Vec<f64> = partner.map_or(Vec::new(), |(w, _)| {
+        w.grid(body, q[w.parameter], w.half, partner_steps)
+    });
+    let partner_step = partner.map_or(0.0, |(w, _)| 2.0 * w.half / partner_steps as f64);
+    let scores: Vec<(i64, Option<f64>)> = if options.parallel {
+        values
+            .par_iter()
+            .map(|&v| score_value(v, &partner_coarse))
+            .collect()
+    } else {
+        values
+            .iter()
+            .map(|&v| score_value(v, &partner_coarse))
+            .collect()
+    };
+    let better = |a: &(f64, i64), b: &(f64, i64)| a.1.cmp(&b.1).then(nearer(a.0, b.0, current));
+    let mut peaks: Vec<usize> = (0..values.len())
+        .filter(|&i| {
+            let left = i.checked_sub(1).map_or(i64::MIN, |l| scores[l].0);
+            let right = scores.get(i + 1).map_or(i64::MIN, |r| r.0);
+            scores[i].0 > 0 && scores[i].0 >= left && scores[i].0 >= right
+        })
+        .collect();
+    peaks.sort_by(|&a, &b| better(&(values[b], scores[b].0), &(values[a], scores[a].0)));
+    let best_coarse = peaks.first().map_or(0, |&i| scores[i].0);
+    // Most values explain nearly as much as the best: the links do not show the joint.
+    let flat = best_coarse > 0
+        && 3 * scores
+            .iter()
+            .filter(|s| 10 * s.0 >= 9 * best_coarse)
+            .count()
+            >= values.len();
+    peaks.retain(|&i| 2 * scores[i].0 >= best_coarse);
+    peaks.truncate(count.max(1));
+    // Each peak again on a grid a quarter as coarse, in both joints.
+    let mut candidates: Vec<Candidate> = peaks
+        .into_iter()
+        .map(|peak| {
+            let fine_values = window.grid(body, values[peak], coarse_step, 8);
+            let fine_partner: Vec<f64> = match (partner, scores[peak].1) {
+                (Some((w, _)), Some(c)) => w.grid(body, c, partner_step, 8),
+                _ => Vec::new(),
+            };
+            let (value, (score, partner_value)) = fine_values
+                .iter()
+                .map(|&v| (v, score_value(v, &fine_partner)))
+                .max_by(|a, b| better(&(a.0, a.1.0), &(b.0, b.1.0)))
+                .expect("a grid has values");
+            Candidate {
+                value,
+                partner: partner
+                    .zip(partner_value)
+                    .map(|((w, _), c)| (w.parameter, c)),
+                deferred: None,
+                score,
+            }
+        })
+        .collect();
+    if candidates.is_empty() {
+        candidates.push(Candidate {
+            value: current,
+            partner: None,
+            deferred: None,
+            score: 0,
+        });
+    }
+    candidates.sort_by(|a, b| better(&(b.value, b.score), &(a.value, a.score)));
+    (candidates, flat)
 }
 
 /// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.

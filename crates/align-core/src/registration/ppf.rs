@@ -1,0 +1,415 @@
+//! Global rigid detection by point pair features (Drost, Ulrich, Navab and Ilic, "Model
+//! globally, match locally", CVPR 2010): where a small rigid part lies in a cluttered scan when
+//! no start is near it.
+//!
+//! Every pair of oriented model samples is described by its distance and three angles (normal
+//! to connecting line, twice, and normal to normal) and stored in a table. A scene point taken
+//! as reference is paired with the scene points around it; each pair looks up the model pairs
+//! with the same description, and each of those votes for a model reference point and a turn
+//! about the reference normal. The winning votes of each scene reference are poses; poses
+//! that agree are merged, their votes summed.
+//!
+//! A scan's normals have no reliable sign (no scanner position is known here), so the angles
+//! are folded to [0, pi/2] and each scene reference votes with both signs of its normal.
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
+
+use super::sampling::voxel_representatives;
+use crate::geometry::Mesh;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PpfOptions {
+    /// Sample spacing on the model and the scene, and the distance bin of the features, m.
+    pub step_m: f64,
+    /// Bins of a folded feature angle over [0, pi/2].
+    pub angle_bins: usize,
+    /// Bins of the turn about the reference normal over a full turn.
+    pub turn_bins: usize,
+    /// Scene points used as references, at most (a stride sample).
+    pub max_references: usize,
+    /// Votes below this fraction of the best pose's are dropped.
+    pub min_vote_fraction: f64,
+}
+
+impl Default for PpfOptions {
+    fn default() -> Self {
+        Self {
+            step_m: 0.015,
+            angle_bins: 6,
+            turn_bins: 30,
+            max_references: 500,
+            min_vote_fraction: 0.2,
+        }
+    }
+}
+
+/// A surface point with its unit normal.
+#[derive(Debug, Clone, Copy)]
+struct Oriented {
+    point: Point3<f64>,
+    normal: Vector3<f64>,
+}
+
+fn cell_of(point: &Point3<f64>, cell_m: f64) -> [i64; 3] {
+    [
+        (point.x / cell_m).floor() as i64,
+        (point.y / cell_m).floor() as i64,
+        (point.z / cell_m).floor() as i64,
+    ]
+}
+
+/// Points on the mesh's triangles, one per `step_m` voxel, with their triangle's normal.
+fn mesh_samples(mesh: &Mesh, step_m: f64) -> Vec<Oriented> {
+    let vertices: Vec<Point3<f64>> = mesh.vertices().collect();
+    let spacing = step_m / 3.0;
+    let mut cells: HashMap<[i64; 3], Oriented> = HashMap::new();
+    for (index, triangle) in mesh.triangles().iter().enumerate() {
+        let [a, b, c] = triangle.map(|i| vertices[i as usize]);
+        let normal = mesh.triangle_normal(index as u32);
+        let longest = (b - a).norm().max((c - a).norm()).max((c - b).norm());
+        let steps = ((longest / spacing).ceil() as usize).max(1);
+        for i in 0..=steps {
+            for j in 0..=steps - i {
+                let point =
+                    a + (b - a) * (i as f64 / steps as f64) + (c - a) * (j as f64 / steps as f64);
+                cells
+                    .entry(cell_of(&point, step_m))
+                    .or_insert(Oriented { point, normal });
+            }
+        }
+    }
+    let mut samples: Vec<([i64; 3], Oriented)> = cells.into_iter().collect();
+    samples.sort_by_key(|(cell, _)| *cell);
+    samples.into_iter().map(|(_, sample)| sample).collect()
+}
+
+/// Points in a hash of cubic cells, for neighbourhood queries.
+struct CellIndex {
+    cell_m: f64,
+    cells: HashMap<[i64; 3], Vec<usize>>,
+}
+
+impl CellIndex {
+    fn new(points: &[Point3<f64>], cell_m: f64) -> Self {
+        let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (index, point) in points.iter().enumerate() {
+            cells.entry(cell_of(point, cell_m)).or_default().push(index);
+        }
+        Self { cell_m, cells }
+    }
+
+    /// Indices of `points` within `radius_m` (at most the cell size) of `centre`.
+    fn within<'a>(
+        &'a self,
+        points: &'a [Point3<f64>],
+        centre: &'a Point3<f64>,
+        radius_m: f64,
+    ) -> impl Iterator<Item = usize> + 'a {
+        let [x, y, z] = cell_of(centre, self.cell_m);
+        (-1..=1)
+            .flat_map(move |dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| (dx, dy, dz))))
+            .filter_map(move |(dx, dy, dz)| self.cells.get(&[x + dx, y + dy, z + dz]))
+            .flatten()
+            .copied()
+            .filter(move |&i| (points[i] - centre).norm_squared() <= radius_m * radius_m)
+    }
+}
+
+/// One point per `step_m` voxel of the scan with the normal of its neighbourhood's plane;
+/// points with too few neighbours for a plane are left out.
+fn scene_samples(cloud: &[Point3<f64>], step_m: f64) -> Vec<Oriented> {
+    let points = voxel_representatives(cloud, step_m);
+    let radius = 2.0 * step_m;
+    let index = CellIndex::new(&points, radius);
+    points
+        .par_iter()
+        .filter_map(|point| {
+            let neighbours: Vec<Point3<f64>> = index
+                .within(&points, point, radius)
+                .map(|i| points[i])
+                .collect();
+            if neighbours.len() < 5 {
+                return None;
+            }
+            let mean = neighbours
+                .iter()
+                .fold(Vector3::zeros(), |sum, p| sum + p.coords)
+                / neighbours.len() as f64;
+            let covariance = neighbours.iter().fold(Matrix3::zeros(), |sum, p| {
+                let d = p.coords - mean;
+                sum + d * d.transpose()
+            });
+            let eigen = covariance.symmetric_eigen();
+            let smallest = eigen.eigenvalues.imin();
+            Some(Oriented {
+                point: *point,
+                normal: eigen.eigenvectors.column(smallest).normalize(),
+            })
+        })
+        .collect()
+}
+
+/// The rotation taking `normal` to +x, and the transform taking `point` to the origin with it.
+fn reference_frame(reference: &Oriented) -> Isometry3<f64> {
+    let rotation = UnitQuaternion::rotation_between(&reference.normal, &Vector3::x())
+        .unwrap_or_else(|| {
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI)
+        });
+    Isometry3::from_parts(Translation3::identity(), rotation)
+        * Isometry3::translation(-reference.point.x, -reference.point.y, -reference.point.z)
+}
+
+/// Angle of `point` about +x once `frame` has moved it (in (-pi, pi]).
+fn turn_of(frame: &Isometry3<f64>, point: &Point3<f64>) -> f64 {
+    let moved = frame * point;
+    moved.z.atan2(moved.y)
+}
+
+/// The folded, binned description of the pair (reference, other) as an index into the table
+/// (`distance_bins` x `angle_bins`^3 slots); none for a pair farther apart than the table
+/// holds and for a pair lying in one plane (both normals across the line joining them and
+/// parallel): a floor or a box face is full of those, and they say nothing of where a part is.
+fn feature(
+    reference: &Oriented,
+    other: &Oriented,
+    distance_bins: usize,
+    options: &PpfOptions,
+) -> Option<usize> {
+    let d = other.point - reference.point;
+    let distance = d.norm();
+    let distance_bin = (distance / options.step_m) as usize;
+    if distance < 1e-9 || distance_bin >= distance_bins {
+        return None;
+    }
+    let direction = d / distance;
+    let bins = options.angle_bins.max(1);
+    let angle_step = std::f64::consts::FRAC_PI_2 / bins as f64;
+    let folded = |cos: f64| {
+        let angle = cos.abs().min(1.0).acos();
+        ((angle / angle_step) as usize).min(bins - 1)
+    };
+    let across_reference = folded(reference.normal.dot(&direction));
+    let across_other = folded(other.normal.dot(&direction));
+    let between = folded(reference.normal.dot(&other.normal));
+    if across_reference == bins - 1 && across_other == bins - 1 && between == 0 {
+        return None;
+    }
+    Some(((distance_bin * bins + across_reference) * bins + across_other) * bins + between)
+}
+
+/// A rigid pose of the model in the scene, with the votes of the references that agree on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PpfPose {
+    pub world_from_model: Isometry3<f64>,
+    pub votes: usize,
+}
+
+/// Poses of `mesh` whose model frame origin lies within `radius_m` of `centre` in `cloud`,
+/// most votes first, at most `count`; two poses are one when they put the mesh's centroid
+/// within two steps of each other and differ by less than `distinct_rad` in rotation.
+pub fn ppf_poses(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    centre: &Point3<f64>,
+    radius_m: f64,
+    options: &PpfOptions,
+    count: usize,
+    distinct_rad: f64,
+) -> Vec<PpfPose> {
+    let model = mesh_samples(mesh, options.step_m);
+    let diameter = 2.0 * mesh.radius_m();
+    if model.len() < 2 || diameter.is_nan() || diameter <= 0.0 {
+        return Vec::new();
+    }
+    // The model's table: description -> (reference sample, its turn).
+    let frames: Vec<Isometry3<f64>> = model.iter().map(reference_frame).collect();
+    let distance_bins = (diameter / options.step_m) as usize + 1;
+    let mut table: Vec<Vec<(u32, f32)>> =
+        vec![Vec::new(); distance_bins * options.angle_bins.max(1).pow(3)];
+    for (r, reference) in model.iter().enumerate() {
+        for (i, other) in model.iter().enumerate() {
+            if r == i {
+                continue;
+            }
+            if let Some(key) = feature(reference, other, distance_bins, options) {
+                table[key].push((r as u32, turn_of(&frames[r], &other.point) as f32));
+            }
+        }
+    }
+    let reach = radius_m + mesh.radius_m() + mesh.centroid().coords.norm();
+    let near: Vec<Point3<f64>> = cloud
+        .iter()
+        .filter(|p| (*p - centre).norm() <= reach)
+        .copied()
+        .collect();
+    let scene = scene_samples(&near, options.step_m);
+    if scene.len() < 2 {
+        return Vec::new();
+    }
+    let scene_points: Vec<Point3<f64>> = scene.iter().map(|s| s.point).collect();
+    let index = CellIndex::new(&scene_points, diameter);
+    let stride = scene.len().div_ceil(options.max_references.max(1));
+    let turn_bins = options.turn_bins.max(1);
+    let turn_step = std::f64::consts::TAU / turn_bins as f64;
+    let model_centroid = mesh.centroid();
+    // Each reference (with either sign of its normal): its best model reference and turn.
+    let mut votes: Vec<(usize, Isometry3<f64>)> = scene
+        .par_iter()
+        .step_by(stride)
+        .flat_map_iter(|reference| {
+            // The description does not depend on the normals' signs; the turn does.
+            let pairs: Vec<(usize, Point3<f64>)> = index
+                .within(&scene_points, &reference.point, diameter)
+                .filter_map(|i| {
+                    feature(reference, &scene[i], distance_bins, options)
+                        .map(|key| (key, scene[i].point))
+                })
+                .collect();
+            let (table, frames, model_samples) = (&table, &frames, model.len());
+            [1.0, -1.0].into_iter().filter_map(move |sign| {
+                let reference = Oriented {
+                    point: reference.point,
+                    normal: reference.normal * sign,
+                };
+                let frame = reference_frame(&reference);
+                let mut accumulator = vec![0u16; model_samples * turn_bins];
+                for (key, point) in &pairs {
+                    let scene_turn = turn_of(&frame, point);
+                    for &(model_reference, model_turn) in &table[*key] {
+                        let turn =
+                            (scene_turn - model_turn as f64).rem_euclid(std::f64::consts::TAU);
+                        let bin = ((turn / turn_step) as usize).min(turn_bins - 1);
+                        let slot = &mut accumulator[model_reference as usize * turn_bins + bin];
+                        *slot = slot.saturating_add(1);
+                    }
+                }
+                let (best, &count) = accumulator
+                    .iter()
+                    .enumerate()
+                    .max_by_key(|(slot, count)| (**count, std::cmp::Reverse(*slot)))?;
+                if count == 0 {
+                    return None;
+                }
+                let (model_reference, bin) = (best / turn_bins, best % turn_bins);
+                let turn = (bin as f64 + 0.5) * turn_step;
+                let pose = frame.inverse()
+                    * Isometry3::rotation(Vector3::x() * turn)
+                    * frames[model_reference];
+                ((pose * Point3::origin() - centre).norm() <= radius_m)
+                    .then_some((count as usize, pose))
+            })
+        })
+        .collect();
+    votes.sort_by_key(|v| std::cmp::Reverse(v.0));
+    let best = votes.first().map_or(0, |v| v.0);
+    // Merge poses that agree, most votes first.
+    let mut merged: Vec<PpfPose> = Vec::new();
+    for (count, pose) in votes {
+        if (count as f64) < options.min_vote_fraction * best as f64 {
+            break;
+        }
+        let same = merged.iter_mut().find(|m| {
+            (m.world_from_model * model_centroid - pose * model_centroid).norm()
+                < 2.0 * options.step_m
+                && m.world_from_model.rotation.angle_to(&pose.rotation) < distinct_rad
+        });
+        match same {
+            Some(m) => m.votes += count,
+            None => merged.push(PpfPose {
+                world_from_model: pose,
+                votes: count,
+            }),
+        }
+    }
+    merged.sort_by_key(|m| std::cmp::Reverse(m.votes));
+    merged.truncate(count);
+    merged
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scan-like cloud of a mesh: points on its surface every few millimetres.
+    fn surface_cloud(mesh: &Mesh, pose: &Isometry3<f64>, step_m: f64) -> Vec<Point3<f64>> {
+        mesh_samples(mesh, step_m)
+            .iter()
+            .map(|s| pose * s.point)
+            .collect()
+    }
+
+    /// A block with a smaller block standing on it, off centre: no symmetry, and locally
+    /// like any box (faces, edges, corners).
+    fn stepped_block() -> Mesh {
+        let lower = Mesh::cuboid([0.2, 0.12, 0.06]).unwrap();
+        let upper = Mesh::cuboid([0.06, 0.06, 0.08]).unwrap();
+        let shift = nalgebra::Vector3::new(0.05, 0.02, 0.07);
+        let mut vertices: Vec<Point3<f64>> = lower.vertices().collect();
+        let offset = vertices.len() as u32;
+        vertices.extend(upper.vertices().map(|v| v + shift));
+        let mut triangles = lower.triangles().to_vec();
+        triangles.extend(upper.triangles().iter().map(|t| t.map(|i| i + offset)));
+        Mesh::new(&vertices, &triangles).unwrap()
+    }
+
+    #[test]
+    fn finds_a_part_turned_and_moved_far_among_clutter() {
+        let part = stepped_block();
+        let truth = Isometry3::from_parts(
+            Translation3::new(0.7, -0.4, 0.3),
+            UnitQuaternion::from_euler_angles(0.9, -0.5, 2.0),
+        );
+        let mut cloud = surface_cloud(&part, &truth, 0.004);
+        // A floor and a larger box beside the part.
+        for i in 0..100 {
+            for j in 0..100 {
+                cloud.push(Point3::new(
+                    -0.5 + i as f64 * 0.02,
+                    -1.5 + j as f64 * 0.02,
+                    0.0,
+                ));
+            }
+        }
+        let other = Mesh::cuboid([0.4, 0.3, 0.3]).unwrap();
+        cloud.extend(surface_cloud(
+            &other,
+            &Isometry3::translation(0.0, -0.6, 0.15),
+            0.004,
+        ));
+        let poses = ppf_poses(
+            &part,
+            &cloud,
+            &Point3::new(0.2, -0.2, 0.2),
+            1.0,
+            &PpfOptions::default(),
+            5,
+            0.3,
+        );
+        assert!(!poses.is_empty());
+        // Every vertex of the part where the best pose puts it, against where it is.
+        let worst = part
+            .vertices()
+            .map(|v| (poses[0].world_from_model * v - truth * v).norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.03, "a vertex {worst} m off; {poses:?}");
+    }
+
+    #[test]
+    fn nothing_in_the_search_ball_gives_no_pose() {
+        let part = stepped_block();
+        let cloud = surface_cloud(&part, &Isometry3::translation(5.0, 0.0, 0.0), 0.004);
+        let poses = ppf_poses(
+            &part,
+            &cloud,
+            &Point3::origin(),
+            0.5,
+            &PpfOptions::default(),
+            5,
+            0.3,
+        );
+        assert!(poses.is_empty(), "{poses:?}");
+    }
+}
