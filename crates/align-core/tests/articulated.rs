@@ -1,6 +1,8 @@
 //! Hierarchical alignment of the shipped robots in scanner-like clouds.
 
-use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use align_core::registration::articulated::{
+    ArticulatedBody, RobotFitOptions, align_robot, searches_globally,
+};
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
 use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
@@ -122,6 +124,33 @@ fn starts_half_a_metre_off_recover_every_visible_link_to_a_millimetre() {
             );
             assert!(worst < 1e-3, "{} seed {seed}: {report:?}", robot.name());
         }
+    }
+}
+
+/// docs/articulated-trials.md says which rows of the trials ran the global search: every
+/// 1000 mm trial, some 500 mm ones (start joints that fold the arm) and none below. The starts
+/// are the trials' (`ips trials`, seed 2024, 50 per delta).
+#[test]
+fn the_trials_search_globally_at_1000_mm_some_at_500_and_never_below() {
+    let truth = cell_pose();
+    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+        let body = ArticulatedBody::from_model(&robot.model().expect("shipped URDF loads"))
+            .expect("shipped robot has surfaces");
+        let global_starts = |delta_m: f64| {
+            let mut rng = TrialRng::new(2024 ^ delta_m.to_bits());
+            (0..50)
+                .filter(|_| {
+                    let (_, q0) = perturb_robot(&body, &truth, &robot.home(), delta_m, &mut rng);
+                    searches_globally(&body, &q0, delta_m)
+                })
+                .count()
+        };
+        for delta_m in [0.05, 0.1, 0.2] {
+            assert_eq!(global_starts(delta_m), 0, "{} {delta_m}", robot.name());
+        }
+        let at_500 = global_starts(0.5);
+        assert!((1..=10).contains(&at_500), "{}: {at_500}", robot.name());
+        assert_eq!(global_starts(1.0), 50, "{}", robot.name());
     }
 }
 

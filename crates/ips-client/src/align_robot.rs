@@ -33,6 +33,9 @@ pub struct AlignRobotArgs {
     #[arg(long, value_name = "A,B,...", allow_hyphen_values = true)]
     pub q0: String,
     /// Upper bound of how far any point of the robot is from where the start puts it, m.
+    /// Beyond the robot's radius the start is taken as not local: the base is detected
+    /// anywhere within twice delta of the start and each joint is searched over its whole
+    /// window (seconds instead of a fraction of a second).
     #[arg(long, allow_hyphen_values = true)]
     pub delta: f64,
     /// Print one JSON document instead of text.

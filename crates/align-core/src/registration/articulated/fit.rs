@@ -46,6 +46,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion
 use rayon::prelude::*;
 
 use super::body::{ArticulatedBody, JointAxis};
+use crate::geometry::Mesh;
 use crate::registration::pca::{PcaError, PcaOptions, align_cloud, pose_candidates};
 use crate::registration::ppf::{PpfOptions, ppf_poses};
 use crate::registration::sampling::voxel_representatives;
@@ -484,11 +485,9 @@ pub fn align_robot(
     let keypoints = voxel_representatives(&near, options.voxel_m);
     let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
     let start_mesh = body.rigid_mesh(q0);
-    // Beyond the robot's own radius the start is no longer local: the robot may be turned by
-    // more than a radian and its joints anywhere in windows of up to a half turn each way.
     let global = start_mesh
         .as_ref()
-        .is_some_and(|mesh| delta_m > GLOBAL_DELTA_PER_RADIUS * mesh.radius_m());
+        .is_some_and(|mesh| is_global(mesh, delta_m));
     let whole = match &start_mesh {
         Some(mesh) => {
             align_cloud(mesh, &near, world_from_root_start, delta_m, &options.base)
@@ -614,6 +613,19 @@ pub fn align_robot(
         rms_m: (sum / matches.len().max(1) as f64).sqrt(),
         time_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// True when [`align_robot`] treats a start as not local and searches globally (detects the
+/// proximal links, searches each joint with its child over its whole window): when delta
+/// exceeds the robot's radius at the start joints, the robot may be turned by more than a
+/// radian and its joints be anywhere in windows of up to a half turn each way.
+pub fn searches_globally(body: &ArticulatedBody, q0: &[f64], delta_m: f64) -> bool {
+    body.rigid_mesh(q0)
+        .is_some_and(|mesh| is_global(&mesh, delta_m))
+}
+
+fn is_global(robot_at_start: &Mesh, delta_m: f64) -> bool {
+    delta_m > GLOBAL_DELTA_PER_RADIUS * robot_at_start.radius_m()
 }
 
 /// Parameters from the root outwards (the order their links appear in the tree).

@@ -5,4 +5,6 @@ pub mod body;
 pub mod fit;
 
 pub use body::{ArticulatedBody, BodyError, BodyLink, BodyParameter};
-pub use fit::{JointFit, LinkFit, RobotFit, RobotFitError, RobotFitOptions, align_robot};
+pub use fit::{
+    JointFit, LinkFit, RobotFit, RobotFitError, RobotFitOptions, align_robot, searches_globally,
+};
