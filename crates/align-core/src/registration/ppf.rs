@@ -346,7 +346,7 @@ mod tests {
     fn stepped_block() -> Mesh {
         let lower = Mesh::cuboid([0.2, 0.12, 0.06]).unwrap();
         let upper = Mesh::cuboid([0.06, 0.06, 0.08]).unwrap();
-        let shift = nalgebra::Vector3::new(0.05, 0.02, 0.07);
+        let shift = Vector3::new(0.05, 0.02, 0.07);
         let mut vertices: Vec<Point3<f64>> = lower.vertices().collect();
         let offset = vertices.len() as u32;
         vertices.extend(upper.vertices().map(|v| v + shift));
