@@ -22,7 +22,9 @@ use crate::geometry::Mesh;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct PpfOptions {
-    /// Sample spacing on the model and the scene, and the distance bin of the features, m.
+    /// Sample spacing on the model and the scene, and the distance bin of the features, m
+    /// (at least a twentieth of the model's radius: the table grows with the square of the
+    /// model's samples).
     pub step_m: f64,
     /// Bins of a folded feature angle over [0, pi/2].
     pub angle_bins: usize,
@@ -200,6 +202,9 @@ fn feature(
     Some(((distance_bin * bins + across_reference) * bins + across_other) * bins + between)
 }
 
+/// The model is sampled no finer than its radius over this.
+const MODEL_SAMPLES_PER_RADIUS: f64 = 20.0;
+
 /// A rigid pose of the model in the scene, with the votes of the references that agree on it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PpfPose {
@@ -219,6 +224,15 @@ pub fn ppf_poses(
     count: usize,
     distinct_rad: f64,
 ) -> Vec<PpfPose> {
+    if !(options.step_m.is_finite() && options.step_m > 0.0) {
+        return Vec::new();
+    }
+    let options = &PpfOptions {
+        step_m: options
+            .step_m
+            .max(mesh.radius_m() / MODEL_SAMPLES_PER_RADIUS),
+        ..options.clone()
+    };
     let model = mesh_samples(mesh, options.step_m);
     let diameter = 2.0 * mesh.radius_m();
     if model.len() < 2 || diameter.is_nan() || diameter <= 0.0 {
@@ -395,6 +409,20 @@ mod tests {
             .map(|v| (poses[0].world_from_model * v - truth * v).norm())
             .fold(0.0, f64::max);
         assert!(worst < 0.03, "a vertex {worst} m off; {poses:?}");
+    }
+
+    #[test]
+    fn a_step_that_is_not_a_positive_distance_gives_no_pose() {
+        let part = stepped_block();
+        let cloud = surface_cloud(&part, &Isometry3::identity(), 0.004);
+        for step_m in [0.0, -0.01, f64::NAN, f64::INFINITY] {
+            let options = PpfOptions {
+                step_m,
+                ..PpfOptions::default()
+            };
+            let poses = ppf_poses(&part, &cloud, &Point3::origin(), 0.5, &options, 5, 0.3);
+            assert!(poses.is_empty(), "{step_m}: {poses:?}");
+        }
     }
 
     #[test]
