@@ -1253,6 +1253,36 @@ fn search_joint(
     }
 }
 
+/// Indices of the local maxima of coarse `scores` over `values` (scores above zero), best first
+/// (ties to the value nearest `current`), those with at least half the best score, at most
+/// `count`; and the best score.
+fn coarse_peaks(
+    values: &[f64],
+    scores: &[(i64, Option<f64>)],
+    current: f64,
+    count: usize,
+) -> (Vec<usize>, i64) {
+    let mut peaks: Vec<usize> = (0..values.len())
+        .filter(|&i| {
+            let left = i.checked_sub(1).map_or(i64::MIN, |l| scores[l].0);
+            let right = scores.get(i + 1).map_or(i64::MIN, |r| r.0);
+            scores[i].0 > 0 && scores[i].0 >= left && scores[i].0 >= right
+        })
+        .collect();
+    // Higher scores first; between equal scores the value nearer the current one.
+    peaks.sort_by(|&a, &b| {
+        scores[b].0.cmp(&scores[a].0).then(
+            (values[a] - current)
+                .abs()
+                .total_cmp(&(values[b] - current).abs()),
+        )
+    });
+    let best = peaks.first().map_or(0, |&i| scores[i].0);
+    peaks.retain(|&i| 2 * scores[i].0 >= best);
+    peaks.truncate(count.max(1));
+    (peaks, best)
+}
+
 /// Values of `q[parameter]` whose links explain the most scan points that the other links do
 /// not (points buried inside a link count against it), searching a window that `delta_m`
 /// allows around the current value (coarse grid, then a finer one around each of the best
@@ -1357,22 +1387,7 @@ fn joint_candidates(
     let band = (coarse_step * window.reach_m).max(coarse_band);
     let coarse_scores = score_grid(&coarse_values, band, None, true);
     // Local maxima of the coarse scores, best first.
-    let mut peaks: Vec<usize> = (0..coarse_values.len())
-        .filter(|&i| {
-            let left = i.checked_sub(1).map_or(i64::MIN, |l| coarse_scores[l].0);
-            let right = coarse_scores.get(i + 1).map_or(i64::MIN, |r| r.0);
-            coarse_scores[i].0 > 0 && coarse_scores[i].0 >= left && coarse_scores[i].0 >= right
-        })
-        .collect();
-    peaks.sort_by(|&a, &b| {
-        better(
-            &(coarse_values[b], coarse_scores[b].0),
-            &(coarse_values[a], coarse_scores[a].0),
-        )
-    });
-    let best_coarse = peaks.first().map_or(0, |&i| coarse_scores[i].0);
-    peaks.retain(|&i| 2 * coarse_scores[i].0 >= best_coarse);
-    peaks.truncate(count.max(1));
+    let (peaks, _) = coarse_peaks(&coarse_values, &coarse_scores, current, count);
     let mut candidates: Vec<Candidate> = peaks
         .into_iter()
         .map(|peak| {
@@ -1693,15 +1708,7 @@ fn pair_search(
             .collect()
     };
     let better = |a: &(f64, i64), b: &(f64, i64)| a.1.cmp(&b.1).then(nearer(a.0, b.0, current));
-    let mut peaks: Vec<usize> = (0..values.len())
-        .filter(|&i| {
-            let left = i.checked_sub(1).map_or(i64::MIN, |l| scores[l].0);
-            let right = scores.get(i + 1).map_or(i64::MIN, |r| r.0);
-            scores[i].0 > 0 && scores[i].0 >= left && scores[i].0 >= right
-        })
-        .collect();
-    peaks.sort_by(|&a, &b| better(&(values[b], scores[b].0), &(values[a], scores[a].0)));
-    let best_coarse = peaks.first().map_or(0, |&i| scores[i].0);
+    let (peaks, best_coarse) = coarse_peaks(&values, &scores, current, count);
     // Most values explain nearly as much as the best: the links do not show the joint.
     let flat = best_coarse > 0
         && 3 * scores
@@ -1709,8 +1716,6 @@ fn pair_search(
             .filter(|s| 10 * s.0 >= 9 * best_coarse)
             .count()
             >= values.len();
-    peaks.retain(|&i| 2 * scores[i].0 >= best_coarse);
-    peaks.truncate(count.max(1));
     // Each peak again on a grid a quarter as coarse, in both joints.
     let mut candidates: Vec<Candidate> = peaks
         .into_iter()
