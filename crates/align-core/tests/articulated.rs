@@ -6,7 +6,9 @@ use align_core::registration::articulated::{
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
 use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
-use align_core::trials::robot_trials::{perturb_robot, surface_deviation_m};
+use align_core::trials::robot_trials::{
+    Methods, RobotScene, perturb_robot, run_robot_trials, surface_deviation_m,
+};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 fn cell_pose() -> Isometry3<f64> {
@@ -151,6 +153,57 @@ fn the_trials_search_globally_at_1000_mm_some_at_500_and_never_below() {
         let at_500 = global_starts(0.5);
         assert!((1..=10).contains(&at_500), "{}: {at_500}", robot.name());
         assert_eq!(global_starts(1.0), 50, "{}", robot.name());
+    }
+}
+
+/// A trial run can start part-way through its seeded sequence: the skipped starts are drawn,
+/// so trials 0 and 1 run apart give what the run of both gives, for both methods, on every
+/// object, and the failed trials are named by their index in the whole sequence.
+#[test]
+fn trials_run_in_parts_give_the_figures_of_the_whole_run() {
+    let robot = ShippedRobot::Ur10;
+    let body = ArticulatedBody::from_model(&robot.model().expect("shipped URDF loads"))
+        .expect("shipped robot has surfaces");
+    let scene = RobotScene {
+        world_from_root: cell_pose(),
+        q: robot.home(),
+        scan: RobotScanOptions::default(),
+    };
+    let both = Methods {
+        independent: true,
+        hierarchical: true,
+    };
+    // 200 mm: the independent method fails some objects there, so failures are numbered too.
+    let run = |trials| run_robot_trials(&body, &scene, &[0.2], trials, 2024, both, |_, _| {});
+    let whole = run(0..2);
+    let first = run(0..1);
+    let second = run(1..2);
+    for ((whole, first), second) in whole.iter().zip(&first).zip(&second) {
+        let object = &whole.object;
+        for (all, a, b) in [
+            (&whole.independent, &first.independent, &second.independent),
+            (
+                &whole.hierarchical,
+                &first.hierarchical,
+                &second.hierarchical,
+            ),
+        ] {
+            let (all, a, b) = (all.as_ref(), a.as_ref(), b.as_ref());
+            let (all, a, b) = (all.expect("ran"), a.expect("ran"), b.expect("ran"));
+            assert!(
+                (all.mean_error_m * 2.0 - a.mean_error_m - b.mean_error_m).abs() < 1e-9,
+                "{object}: {all:?} vs {a:?} + {b:?}"
+            );
+            assert_eq!(all.succeeded, a.succeeded + b.succeeded, "{object}");
+            let named: Vec<usize> = a
+                .failed_trials
+                .iter()
+                .chain(&b.failed_trials)
+                .copied()
+                .collect();
+            assert_eq!(all.failed_trials, named, "{object}");
+            assert!(b.failed_trials.iter().all(|&t| t == 1), "{object}: {b:?}");
+        }
     }
 }
 

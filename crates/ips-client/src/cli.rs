@@ -192,6 +192,11 @@ pub struct TrialsArgs {
     /// so its figures match those of a run with both).
     #[arg(long, requires = "robot", conflicts_with = "hierarchical_only")]
     pub independent_only: bool,
+    /// With --robot: start at this trial (0-based) of each delta's seeded sequence; the starts
+    /// before it are drawn and skipped, so `--first-trial 31 --trials 1` reproduces trial 31
+    /// alone and a long run can be split into parts with the same figures.
+    #[arg(long, value_name = "N", default_value_t = 0, requires = "robot")]
+    pub first_trial: usize,
     /// Print one JSON document instead of Markdown tables.
     #[arg(long)]
     pub json: bool,

@@ -20,6 +20,9 @@ pub struct TallyJson {
     pub failed: usize,
     pub mean_error_mm: f64,
     pub mean_time_s: f64,
+    /// Indices of the failed trials in the seeded sequence (rerun one with --first-trial N
+    /// --trials 1).
+    pub failed_trials: Vec<usize>,
 }
 
 impl From<&Tally> for TallyJson {
@@ -29,6 +32,7 @@ impl From<&Tally> for TallyJson {
             failed: tally.failed,
             mean_error_mm: tally.mean_error_m * 1e3,
             mean_time_s: tally.mean_time_s,
+            failed_trials: tally.failed_trials.clone(),
         }
     }
 }
@@ -45,6 +49,8 @@ pub struct RobotRowJson {
 pub struct RobotTrialsOutput {
     pub robot: String,
     pub trials_per_delta: usize,
+    /// Index of the first trial run in each delta's seeded sequence.
+    pub first_trial: usize,
     pub seed: u64,
     pub cloud_points: usize,
     pub rows: Vec<RobotRowJson>,
@@ -97,14 +103,14 @@ pub fn run(
         &body,
         &scene,
         &deltas_m,
-        args.trials,
+        args.first_trial..args.first_trial + args.trials,
         args.seed,
         Methods {
             independent: !args.hierarchical_only,
             hierarchical: !args.independent_only,
         },
         |delta_m, trial| {
-            if trial + 1 == args.trials {
+            if trial + 1 == args.first_trial + args.trials {
                 progress(&format!(
                     "{}: delta {:.0} mm done",
                     robot.name(),
@@ -116,6 +122,7 @@ pub fn run(
     Ok(RobotTrialsOutput {
         robot: robot.name().to_owned(),
         trials_per_delta: args.trials,
+        first_trial: args.first_trial,
         seed: args.seed,
         cloud_points,
         rows: rows.iter().map(row_json).collect(),
@@ -134,8 +141,8 @@ fn row_json(row: &RobotTrialRow) -> RobotRowJson {
 impl RobotTrialsOutput {
     pub fn to_markdown(&self) -> String {
         let mut text = format!(
-            "Robot PCA trials on '{}' ({} cloud points), {} trials per delta, seed {} (success: surface deviation < 1 mm)\n\n",
-            self.robot, self.cloud_points, self.trials_per_delta, self.seed
+            "Robot PCA trials on '{}' ({} cloud points), {} trials per delta (from trial {} of the sequence), seed {} (success: surface deviation < 1 mm)\n\n",
+            self.robot, self.cloud_points, self.trials_per_delta, self.first_trial, self.seed
         );
         text += "| Object | Delta (mm) | independent: succeed | independent: fail | independent: avg error (mm) | independent: avg time (s) | hierarchical: succeed | hierarchical: fail | hierarchical: avg error (mm) | hierarchical: avg time (s) |\n";
         text += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
@@ -166,6 +173,30 @@ impl RobotTrialsOutput {
                     cells(&row.hierarchical)
                 );
             }
+        }
+        let failures: Vec<String> = self
+            .rows
+            .iter()
+            .flat_map(|row| {
+                [
+                    ("independent", &row.independent),
+                    ("hierarchical", &row.hierarchical),
+                ]
+                .into_iter()
+                .filter_map(move |(method, tally)| {
+                    let tally = tally.as_ref()?;
+                    (!tally.failed_trials.is_empty()).then(|| {
+                        format!(
+                            "- {} at {:.0} mm, {method}: {:?}\n",
+                            row.object, row.delta_mm, tally.failed_trials
+                        )
+                    })
+                })
+            })
+            .collect();
+        if !failures.is_empty() {
+            text += "\nFailed trials (rerun one with --first-trial N --trials 1):\n\n";
+            text += &failures.concat();
         }
         text
     }

@@ -314,3 +314,39 @@ fn bad_input_exits_2_with_the_reason() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `ips trials --robot` can start part-way through its seeded sequence and says where it
+/// started; `--first-trial` without `--robot` is refused.
+#[test]
+fn robot_trials_start_at_a_given_trial_and_say_so() {
+    let output = ips(&[
+        "trials",
+        "--robot",
+        "ur10",
+        "--deltas",
+        "50",
+        "--trials",
+        "1",
+        "--first-trial",
+        "3",
+        "--hierarchical-only",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(json["first_trial"], 3, "{json}");
+    assert_eq!(json["trials_per_delta"], 1, "{json}");
+    let whole = &json["rows"][0]["hierarchical"];
+    let failed = whole["failed_trials"].as_array().unwrap();
+    assert_eq!(
+        whole["failed"].as_u64().unwrap() as usize,
+        failed.len(),
+        "{json}"
+    );
+    assert!(failed.iter().all(|t| t == 3), "{json}");
+
+    let output = ips(&["trials", "--first-trial", "3"]);
+    assert_eq!(output.status.code(), Some(2), "{output:?}");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("--robot"), "{stderr}");
+}

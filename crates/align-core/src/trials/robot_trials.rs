@@ -6,6 +6,7 @@
 //! alignment puts it and where it truly is (both ways). Unlike a pose distance this is zero for
 //! a cylinder turned about its own axis, which no scan can tell apart.
 
+use std::ops::Range;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion};
@@ -114,26 +115,32 @@ pub struct Outcome {
 }
 
 /// Succeed / fail / mean error / mean time over trials.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Tally {
     pub succeeded: usize,
     pub failed: usize,
     pub mean_error_m: f64,
     pub mean_time_s: f64,
+    /// Indices in the seeded sequence of the trials that failed, to reproduce them with
+    /// `first_trial` (see [`run_robot_trials`]).
+    pub failed_trials: Vec<usize>,
 }
 
 impl Tally {
-    pub fn from_outcomes(outcomes: &[Outcome]) -> Self {
+    /// Tallies outcomes numbered by their trials.
+    pub fn from_numbered(outcomes: &[(usize, Outcome)]) -> Self {
         let n = outcomes.len().max(1) as f64;
-        let succeeded = outcomes
+        let failed_trials: Vec<usize> = outcomes
             .iter()
-            .filter(|o| o.error_m < SUCCESS_THRESHOLD_M)
-            .count();
+            .filter(|(_, o)| o.error_m >= SUCCESS_THRESHOLD_M)
+            .map(|(trial, _)| *trial)
+            .collect();
         Self {
-            succeeded,
-            failed: outcomes.len() - succeeded,
-            mean_error_m: outcomes.iter().map(|o| o.error_m).sum::<f64>() / n,
-            mean_time_s: outcomes.iter().map(|o| o.time_s).sum::<f64>() / n,
+            succeeded: outcomes.len() - failed_trials.len(),
+            failed: failed_trials.len(),
+            mean_error_m: outcomes.iter().map(|(_, o)| o.error_m).sum::<f64>() / n,
+            mean_time_s: outcomes.iter().map(|(_, o)| o.time_s).sum::<f64>() / n,
+            failed_trials,
         }
     }
 }
@@ -224,15 +231,17 @@ fn finite_or_delta(error_m: f64, delta_m: f64) -> f64 {
     }
 }
 
-/// Runs `trials` seeded trials per delta: the hierarchical fit of the robot from a perturbed
-/// start and the rigid alignment of the whole robot and of each link from the thesis's
-/// displacement, as `methods` asks. Links are those with geometry. Each method draws from its
-/// own seeded stream, so a method's figures are the same whether or not the other one runs.
+/// Runs the seeded trials `trials` (indices into each delta's sequence; the starts of the trials
+/// before `trials.start` are drawn and skipped, so a long run can be split and a failed trial
+/// reproduced alone) per delta: the hierarchical fit of the robot from a perturbed start and the
+/// rigid alignment of the whole robot and of each link from the thesis's displacement, as
+/// `methods` asks. Links are those with geometry. Each method draws from its own seeded stream,
+/// so a method's figures are the same whether or not the other one runs.
 pub fn run_robot_trials(
     body: &ArticulatedBody,
     scene: &RobotScene,
     deltas_m: &[f64],
-    trials: usize,
+    trials: Range<usize>,
     seed: u64,
     methods: Methods,
     mut on_trial: impl FnMut(f64, usize),
@@ -243,27 +252,45 @@ pub fn run_robot_trials(
         .filter(|&l| body.links()[l].surface.is_some())
         .collect();
     let whole = body.rigid_mesh(&scene.q);
+    // The independent method's objects: the whole robot (when it has geometry), then each link.
+    let objects: Vec<(&Mesh, Isometry3<f64>)> = whole
+        .iter()
+        .map(|mesh| (mesh, scene.world_from_root))
+        .chain(links.iter().map(|&link| {
+            (
+                body.links()[link].surface.as_ref().expect("has surface"),
+                poses[link],
+            )
+        }))
+        .collect();
     let pca_options = PcaOptions::default();
     let mut rows = Vec::new();
     for &delta_m in deltas_m {
         let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
         let mut rigid_rng = TrialRng::new(seed ^ delta_m.to_bits() ^ INDEPENDENT_STREAM);
+        for _ in 0..trials.start {
+            perturb_robot(body, &scene.world_from_root, &scene.q, delta_m, &mut rng);
+            for (mesh, _) in &objects {
+                random_displacement(&mut rigid_rng, delta_m, mesh.radius_m());
+            }
+        }
         // Outcomes per object: index 0 the whole robot, then one per link.
-        let mut hierarchical = vec![Vec::new(); links.len() + 1];
-        let mut rigid = vec![Vec::new(); links.len() + 1];
-        for trial in 0..trials {
+        let mut hierarchical: Vec<Vec<(usize, Outcome)>> = vec![Vec::new(); links.len() + 1];
+        let mut rigid: Vec<Vec<(usize, Outcome)>> = vec![Vec::new(); links.len() + 1];
+        let rigid_offset = usize::from(whole.is_none());
+        for trial in trials.clone() {
             on_trial(delta_m, trial);
             if methods.hierarchical {
                 hierarchical_trial(body, scene, &cloud, &poses, &links, delta_m, &mut rng)
                     .into_iter()
                     .zip(hierarchical.iter_mut())
-                    .for_each(|(outcome, slot)| slot.push(outcome));
+                    .for_each(|(outcome, slot)| slot.push((trial, outcome)));
             }
             if !methods.independent {
                 continue;
             }
-            let rigid_trial = |mesh: &Mesh, truth: &Isometry3<f64>, rng: &mut TrialRng| {
-                let displacement = random_displacement(rng, delta_m, mesh.radius_m());
+            for (slot, (mesh, truth)) in objects.iter().enumerate() {
+                let displacement = random_displacement(&mut rigid_rng, delta_m, mesh.radius_m());
                 let start = super::displace_about_centroid(truth, mesh, &displacement);
                 let started = Instant::now();
                 let result = align_cloud(mesh, &cloud, &start, delta_m, &pca_options);
@@ -271,14 +298,7 @@ pub fn run_robot_trials(
                 let error_m = result.map_or(delta_m, |r| {
                     surface_deviation_m(mesh, &r.base_from_part, truth)
                 });
-                Outcome { error_m, time_s }
-            };
-            if let Some(mesh) = &whole {
-                rigid[0].push(rigid_trial(mesh, &scene.world_from_root, &mut rigid_rng));
-            }
-            for (slot, &link) in links.iter().enumerate() {
-                let mesh = body.links()[link].surface.as_ref().expect("has surface");
-                rigid[slot + 1].push(rigid_trial(mesh, &poses[link], &mut rigid_rng));
+                rigid[slot + rigid_offset].push((trial, Outcome { error_m, time_s }));
             }
         }
         let names = std::iter::once(body.robot.clone())
@@ -289,10 +309,10 @@ pub fn run_robot_trials(
                 delta_m,
                 independent: methods
                     .independent
-                    .then(|| Tally::from_outcomes(&rigid[slot])),
+                    .then(|| Tally::from_numbered(&rigid[slot])),
                 hierarchical: methods
                     .hierarchical
-                    .then(|| Tally::from_outcomes(&hierarchical[slot])),
+                    .then(|| Tally::from_numbered(&hierarchical[slot])),
             });
         }
     }
