@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use align_core::io::read_cloud;
-use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::pose::{isometry_from_xyz_rpy, xyz_rpy};
 use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
 use clap::Args;
@@ -83,11 +82,6 @@ pub struct AlignRobotOutput {
 }
 
 pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {
-    let mut packages = PackageMap::new();
-    for entry in &args.package_dirs {
-        let (name, dir) = PackageMap::parse_entry(entry).map_err(BadInput)?;
-        packages.insert(name, dir);
-    }
     let pose = parse_number_list(&args.base_pose, "--base-pose")?;
     let [x, y, z, roll, pitch, yaw] = pose[..] else {
         return Err(BadInput(format!(
@@ -102,7 +96,7 @@ pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {
             args.delta
         )));
     }
-    let model = RobotModel::from_urdf_file(&args.urdf, &packages).map_err(BadInput::new)?;
+    let model = crate::load_urdf(&args.urdf, &args.package_dirs)?;
     let body = ArticulatedBody::from_model(&model)
         .map_err(|error| BadInput(format!("'{}': {error}", args.urdf.display())))?;
     let cloud = read_cloud(&args.cloud, args.cloud_scale).map_err(BadInput::new)?;

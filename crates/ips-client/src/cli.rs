@@ -9,8 +9,10 @@ use clap::{Args, Parser, Subcommand};
     name = "ips",
     version,
     about = "Align a simulation's virtual geometry with the real cell using a collaborative robot",
-    long_about = "ips is the IPS side of cobot-align. Today it evaluates robot kinematics from URDF \
-                  descriptions; exit code 0 means success, 2 bad input (with a one-line reason on stderr)."
+    long_about = "ips is the IPS side of cobot-align: the alignment service and its clients, the \
+                  alignments (touches, scanner clouds, robots in clouds), the diagnosis of what the \
+                  model lacks, and the trials behind the docs' tables. Exit code 0 means success, 2 \
+                  bad input (with a one-line reason on stderr)."
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -27,7 +29,7 @@ pub enum Command {
     /// The thesis's alignment trials (PSA): random displacements of a test part, recovered by
     /// the thesis's method and by ours on the same seeds; prints the thesis's table.
     #[command(
-        after_help = "Example:\n  ips trials --trials 50 --deltas 50,100,200,500,1000 > docs/psa-trials.md"
+        after_help = "Examples:\n  ips trials --trials 50 --deltas 50,100,200,500,1000 > docs/psa-trials.md\n  ips trials --robot ur10 --deltas 500 --hierarchical-only\n  ips trials --urdf my_robot.urdf --package-dir my_robot_support=/opt/my_robot_support \\\n      --home 0,0.3,-0.2,0,0.6,0 --deltas 50,100 --trials 10 --hierarchical-only"
     )]
     Trials(TrialsArgs),
     /// Point Set Alignment: move the session's part until it matches its inspections.
@@ -163,6 +165,7 @@ pub struct AlignArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("robot_source").args(["robot", "urdf"])))]
 pub struct TrialsArgs {
     /// Trials per delta.
     #[arg(long, default_value_t = 50)]
@@ -184,18 +187,36 @@ pub struct TrialsArgs {
     /// whole robot and each link aligned independently (thesis PCA) and hierarchically.
     #[arg(long, value_name = "NAME", conflicts_with_all = ["pca", "touches"])]
     pub robot: Option<String>,
-    /// With --robot: only the hierarchical alignment (the independent one takes most of the
-    /// time).
-    #[arg(long, requires = "robot")]
+    /// Robot trials on a robot of your own instead: its URDF with link geometry (visual or
+    /// collision meshes or primitives; expand xacro files first), in the scene of --robot.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["pca", "touches"])]
+    pub urdf: Option<PathBuf>,
+    /// With --urdf: where a ROS package named in package:// mesh URIs lives; repeatable.
+    /// Packages not given are looked for among the URDF file's parent folders.
+    #[arg(long = "package-dir", value_name = "NAME=DIR", requires = "urdf")]
+    pub package_dirs: Vec<String>,
+    /// With --robot or --urdf: the joint values the robot is scanned at, one per moving joint
+    /// that mimics none, in the URDF's order (rad or m). Default: the shipped robot's home
+    /// pose; for --urdf every joint at 0, or at the limit nearest 0.
+    #[arg(
+        long,
+        value_name = "A,B,...",
+        allow_hyphen_values = true,
+        requires = "robot_source"
+    )]
+    pub home: Option<String>,
+    /// With --robot or --urdf: only the hierarchical alignment (the independent one takes most
+    /// of the time).
+    #[arg(long, requires = "robot_source")]
     pub hierarchical_only: bool,
-    /// With --robot: only the independent alignment (each method draws its own seeded starts,
-    /// so its figures match those of a run with both).
-    #[arg(long, requires = "robot", conflicts_with = "hierarchical_only")]
+    /// With --robot or --urdf: only the independent alignment (each method draws its own
+    /// seeded starts, so its figures match those of a run with both).
+    #[arg(long, requires = "robot_source", conflicts_with = "hierarchical_only")]
     pub independent_only: bool,
-    /// With --robot: start at this trial (0-based) of each delta's seeded sequence; the starts
-    /// before it are drawn and skipped, so `--first-trial 31 --trials 1` reproduces trial 31
-    /// alone and a long run can be split into parts with the same figures.
-    #[arg(long, value_name = "N", default_value_t = 0, requires = "robot")]
+    /// With --robot or --urdf: start at this trial (0-based) of each delta's seeded sequence;
+    /// the starts before it are drawn and skipped, so `--first-trial 31 --trials 1` reproduces
+    /// trial 31 alone and a long run can be split into parts with the same figures.
+    #[arg(long, value_name = "N", default_value_t = 0, requires = "robot_source")]
     pub first_trial: usize,
     /// Print one JSON document instead of Markdown tables.
     #[arg(long)]

@@ -1,6 +1,5 @@
 //! `ips fk`: forward kinematics of any chain of a URDF robot.
 
-use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::pose::{matrix_rows, xyz_rpy};
 use serde::Serialize;
 
@@ -21,12 +20,7 @@ pub struct FkOutput {
 }
 
 pub fn run(args: &FkArgs) -> Result<FkOutput, BadInput> {
-    let mut packages = PackageMap::new();
-    for entry in &args.package_dirs {
-        let (name, dir) = PackageMap::parse_entry(entry).map_err(BadInput)?;
-        packages.insert(name, dir);
-    }
-    let model = RobotModel::from_urdf_file(&args.urdf, &packages).map_err(BadInput::new)?;
+    let model = crate::load_urdf(&args.urdf, &args.package_dirs)?;
     let chain = model.chain(&args.base, &args.tip).map_err(BadInput::new)?;
     let q = parse_number_list(&args.q, "--q")?;
     let base_from_tip = chain.forward(&q).map_err(BadInput::new)?;

@@ -26,6 +26,21 @@ impl BadInput {
     }
 }
 
+/// Loads a URDF, its package:// meshes resolved from `--package-dir NAME=DIR` entries (and the
+/// URDF's parent folders for packages not given).
+pub fn load_urdf(
+    urdf: &std::path::Path,
+    package_dirs: &[String],
+) -> Result<align_core::kinematics::RobotModel, BadInput> {
+    let mut packages = align_core::kinematics::PackageMap::new();
+    for entry in package_dirs {
+        let (name, dir) =
+            align_core::kinematics::PackageMap::parse_entry(entry).map_err(BadInput)?;
+        packages.insert(name, dir);
+    }
+    align_core::kinematics::RobotModel::from_urdf_file(urdf, &packages).map_err(BadInput::new)
+}
+
 /// Parses a comma-separated list of numbers such as `0.1,-1.2,1.4`; `what` names the list in
 /// errors.
 pub fn parse_number_list(text: &str, what: &str) -> Result<Vec<f64>, BadInput> {

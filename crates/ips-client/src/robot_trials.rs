@@ -48,6 +48,8 @@ pub struct RobotRowJson {
 #[derive(Debug, Serialize)]
 pub struct RobotTrialsOutput {
     pub robot: String,
+    /// The joint values the robot was scanned at.
+    pub home: Vec<f64>,
     pub trials_per_delta: usize,
     /// Index of the first trial run in each delta's seeded sequence.
     pub first_trial: usize,
@@ -56,29 +58,89 @@ pub struct RobotTrialsOutput {
     pub rows: Vec<RobotRowJson>,
 }
 
-/// Where the trials put the robot: its root 0.2 m off the cell origin, turned 0.4 rad.
-pub fn trial_scene(robot: ShippedRobot) -> RobotScene {
+/// Where the trials put the robot: its root 0.2 m off the cell origin, turned 0.4 rad, its
+/// joints at `q`.
+pub fn trial_scene(q: Vec<f64>) -> RobotScene {
     RobotScene {
         world_from_root: Isometry3::from_parts(
             Translation3::new(0.2, -0.1, 0.0),
             UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
         ),
-        q: robot.home(),
+        q,
         scan: RobotScanOptions::default(),
     }
 }
 
+/// The robot of `--robot NAME` or `--urdf FILE [--package-dir NAME=DIR]...`, and its home.
+fn load_robot(args: &TrialsArgs) -> Result<(ArticulatedBody, Vec<f64>), BadInput> {
+    let (model, shipped) = match (&args.robot, &args.urdf) {
+        (Some(name), _) => {
+            let robot = ShippedRobot::from_name(name).ok_or_else(|| {
+                BadInput(format!(
+                    "--robot {name}: the shipped robots are {} (or give --urdf FILE)",
+                    ShippedRobot::ALL.map(|r| r.name()).join(", ")
+                ))
+            })?;
+            (robot.model().map_err(BadInput::new)?, Some(robot))
+        }
+        (None, Some(urdf)) => {
+            let model = crate::load_urdf(urdf, &args.package_dirs)?;
+            (model, None)
+        }
+        (None, None) => {
+            return Err(BadInput(
+                "robot trials need --robot NAME or --urdf FILE".to_owned(),
+            ));
+        }
+    };
+    let body = ArticulatedBody::from_model(&model).map_err(BadInput::new)?;
+    let home = match (&args.home, shipped) {
+        (Some(text), _) => {
+            let home = crate::parse_number_list(text, "--home")?;
+            check_home(&body, &home)?;
+            home
+        }
+        (None, Some(robot)) => robot.home(),
+        (None, None) => body
+            .parameters()
+            .iter()
+            .map(|p| 0.0f64.clamp(p.lower, p.upper))
+            .collect(),
+    };
+    Ok((body, home))
+}
+
+/// `--home` has one finite value per parameter, each within its joint's limits.
+fn check_home(body: &ArticulatedBody, home: &[f64]) -> Result<(), BadInput> {
+    let parameters = body.parameters();
+    if home.len() != parameters.len() {
+        return Err(BadInput(format!(
+            "--home: {} values for the {} moving joints of '{}' ({})",
+            home.len(),
+            parameters.len(),
+            body.robot,
+            parameters
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    for (value, parameter) in home.iter().zip(parameters) {
+        if !(parameter.lower..=parameter.upper).contains(value) {
+            return Err(BadInput(format!(
+                "--home: {value} for joint '{}' is outside its limits [{}, {}]",
+                parameter.name, parameter.lower, parameter.upper
+            )));
+        }
+    }
+    Ok(())
+}
+
 pub fn run(
     args: &TrialsArgs,
-    robot_name: &str,
     mut progress: impl FnMut(&str),
 ) -> Result<RobotTrialsOutput, BadInput> {
-    let robot = ShippedRobot::from_name(robot_name).ok_or_else(|| {
-        BadInput(format!(
-            "--robot {robot_name}: the shipped robots are {}",
-            ShippedRobot::ALL.map(|r| r.name()).join(", ")
-        ))
-    })?;
     let deltas_mm = crate::parse_number_list(&args.deltas, "--deltas")?;
     if let Some(bad) = deltas_mm.iter().find(|d| **d <= 0.0) {
         return Err(BadInput(format!(
@@ -89,9 +151,8 @@ pub fn run(
         return Err(BadInput("--trials must be at least 1".to_owned()));
     }
     let deltas_m: Vec<f64> = deltas_mm.iter().map(|d| d * 1e-3).collect();
-    let model = robot.model().map_err(BadInput::new)?;
-    let body = ArticulatedBody::from_model(&model).map_err(BadInput::new)?;
-    let scene = trial_scene(robot);
+    let (body, home) = load_robot(args)?;
+    let scene = trial_scene(home);
     let cloud_points = align_core::trials::robot_scan::scan_robot(
         &body,
         &scene.world_from_root,
@@ -110,17 +171,19 @@ pub fn run(
             hierarchical: !args.independent_only,
         },
         |delta_m, trial| {
-            if trial + 1 == args.first_trial + args.trials {
-                progress(&format!(
-                    "{}: delta {:.0} mm done",
-                    robot.name(),
-                    delta_m * 1e3
-                ));
-            }
+            progress(&format!(
+                "{}: delta {:.0} mm, trial {} (running {}-{})",
+                body.robot,
+                delta_m * 1e3,
+                trial,
+                args.first_trial,
+                args.first_trial + args.trials - 1
+            ));
         },
     );
     Ok(RobotTrialsOutput {
-        robot: robot.name().to_owned(),
+        robot: body.robot.clone(),
+        home: scene.q.clone(),
         trials_per_delta: args.trials,
         first_trial: args.first_trial,
         seed: args.seed,
@@ -141,8 +204,13 @@ fn row_json(row: &RobotTrialRow) -> RobotRowJson {
 impl RobotTrialsOutput {
     pub fn to_markdown(&self) -> String {
         let mut text = format!(
-            "Robot PCA trials on '{}' ({} cloud points), {} trials per delta (from trial {} of the sequence), seed {} (success: surface deviation < 1 mm)\n\n",
-            self.robot, self.cloud_points, self.trials_per_delta, self.first_trial, self.seed
+            "Robot PCA trials on '{}' scanned at joints {:?} ({} cloud points), {} trials per delta (from trial {} of the sequence), seed {} (success: surface deviation < 1 mm)\n\n",
+            self.robot,
+            self.home,
+            self.cloud_points,
+            self.trials_per_delta,
+            self.first_trial,
+            self.seed
         );
         text += "| Object | Delta (mm) | independent: succeed | independent: fail | independent: avg error (mm) | independent: avg time (s) | hierarchical: succeed | hierarchical: fail | hierarchical: avg error (mm) | hierarchical: avg time (s) |\n";
         text += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";

@@ -143,9 +143,10 @@ fn the_shipped_ur10_is_found_in_a_cluttered_scan() {
     assert_eq!(flags, [true, false, false, false, false, false], "{result}");
 }
 
-#[test]
-fn a_robot_with_mesh_links_and_a_prismatic_joint_is_found() {
-    let dir = scratch_dir("package");
+/// Writes a robot of its own into `dir`: a box base, an L-shaped mesh arm (package://my_robot)
+/// on a revolute joint and a box carriage on a prismatic one. Returns the URDF and the
+/// `--package-dir` value.
+fn slider_robot(dir: &Path) -> (PathBuf, String) {
     let meshes = dir.join("my_robot/meshes");
     std::fs::create_dir_all(&meshes).unwrap();
     // An L-shaped arm: no symmetry for the scan to hide a rotation in.
@@ -181,6 +182,13 @@ fn a_robot_with_mesh_links_and_a_prismatic_joint_is_found() {
     )
     .unwrap();
     let package = format!("my_robot={}", dir.join("my_robot").display());
+    (urdf, package)
+}
+
+#[test]
+fn a_robot_with_mesh_links_and_a_prismatic_joint_is_found() {
+    let dir = scratch_dir("package");
+    let (urdf, package) = slider_robot(&dir);
     let mut packages = PackageMap::new();
     let (name, path) = PackageMap::parse_entry(&package).unwrap();
     packages.insert(name, path);
@@ -349,4 +357,56 @@ fn robot_trials_start_at_a_given_trial_and_say_so() {
     assert_eq!(output.status.code(), Some(2), "{output:?}");
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("--robot"), "{stderr}");
+}
+
+/// `ips trials --urdf`: the robot trials on a robot that is not shipped, scanned at `--home`;
+/// a `--home` that does not fit the robot is refused with its joints named.
+#[test]
+fn robot_trials_run_on_a_urdf_of_ones_own() {
+    let dir = scratch_dir("trials-urdf");
+    let (urdf, package) = slider_robot(&dir);
+    let urdf = urdf.to_str().unwrap();
+    let trials = |home: &str| {
+        ips(&[
+            "trials",
+            "--urdf",
+            urdf,
+            "--package-dir",
+            &package,
+            "--home",
+            home,
+            "--deltas",
+            "50",
+            "--trials",
+            "2",
+            "--hierarchical-only",
+            "--json",
+        ])
+    };
+    let output = trials("0.7,0.25");
+    let refused = trials("0.7");
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(output.status.success(), "{output:?}");
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(json["robot"], "slider", "{json}");
+    assert_eq!(json["home"], serde_json::json!([0.7, 0.25]), "{json}");
+    let objects: Vec<&str> = json["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| row["object"].as_str().unwrap())
+        .collect();
+    assert_eq!(objects, ["slider", "base", "arm", "carriage"], "{json}");
+    for row in json["rows"].as_array().unwrap() {
+        assert_eq!(row["hierarchical"]["succeeded"], 2, "{json}");
+        assert!(row["independent"].is_null(), "{json}");
+    }
+
+    assert_eq!(refused.status.code(), Some(2), "{refused:?}");
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("--home: 1 values for the 2 moving joints")
+            && stderr.contains("turn, slide"),
+        "{stderr}"
+    );
 }

@@ -108,9 +108,8 @@ fn run(command: Command) -> Result<String, BadInput> {
                 output.to_text()
             })
         }
-        Command::Trials(args) if args.robot.is_some() => {
-            let robot = args.robot.as_deref().unwrap_or_default();
-            let output = ips_client::robot_trials::run(&args, robot, |line| eprintln!("{line}"))?;
+        Command::Trials(args) if args.robot.is_some() || args.urdf.is_some() => {
+            let output = ips_client::robot_trials::run(&args, |line| eprintln!("{line}"))?;
             Ok(if args.json {
                 json_line(&output)?
             } else {

@@ -571,17 +571,19 @@ pub fn align_robot(
         options,
         true,
     );
-    let placed = Placed::new(body, &world_from_root, &q);
-    let all: Vec<usize> = (0..body.links().len()).collect();
-    let matches = correspond(
-        &placed,
-        &keypoints,
-        options.band_min_m,
-        &all,
-        options.parallel,
-    );
-    let links = link_fits(body, &matches, options.min_link_points);
-    let observed = observed_parameters(body, &placed, &matches, &links, options);
+    let (mut matches, mut links, mut observed) =
+        final_state(body, &keypoints, &world_from_root, &q, options);
+    if global {
+        iterations += second_look(
+            body,
+            (&coarse, &keypoints),
+            &mut world_from_root,
+            &mut q,
+            delta_m,
+            options,
+            (&mut matches, &mut links, &mut observed),
+        );
+    }
     for (parameter, seen) in observed.iter().enumerate() {
         if !seen {
             q[parameter] = q0[parameter];
@@ -613,6 +615,105 @@ pub fn align_robot(
         rms_m: (sum / matches.len().max(1) as f64).sqrt(),
         time_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The fit's correspondences on the exact surfaces, per-link fits and observed parameters.
+fn final_state(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    options: &RobotFitOptions,
+) -> (Vec<Match>, Vec<LinkFit>, Vec<bool>) {
+    let placed = Placed::new(body, world_from_root, q);
+    let all: Vec<usize> = (0..body.links().len()).collect();
+    let matches = correspond(
+        &placed,
+        keypoints,
+        options.band_min_m,
+        &all,
+        options.parallel,
+    );
+    let links = link_fits(body, &matches, options.min_link_points);
+    let observed = observed_parameters(body, &placed, &matches, &links, options);
+    (matches, links, observed)
+}
+
+/// After a global search: a joint whose own links turn in place about its axis (a nearly round
+/// link, such as a UR wrist) shows its angle only through the links after it, which may hold few
+/// points; searched while the joints above were still wrong it can settle on a wrong value that
+/// the refinement cannot leave. Each such joint is searched once more, with its child, from the
+/// final state; a candidate is kept only when, refined, it explains at least `min_link_points`
+/// more keypoints than the fit. Returns the iterations spent.
+#[allow(clippy::type_complexity)]
+fn second_look(
+    body: &ArticulatedBody,
+    (coarse, keypoints): (&[Point3<f64>], &[Point3<f64>]),
+    world_from_root: &mut Isometry3<f64>,
+    q: &mut Vec<f64>,
+    delta_m: f64,
+    options: &RobotFitOptions,
+    (matches, links, observed): (&mut Vec<Match>, &mut Vec<LinkFit>, &mut Vec<bool>),
+) -> usize {
+    let mut iterations = 0;
+    for parameter in search_order(body) {
+        let placed = Placed::new(body, world_from_root, q);
+        let spins = spins_in_place(body, &placed, parameter, options.min_observability);
+        if !spins {
+            continue;
+        }
+        let candidates = global_joint_candidates(
+            body,
+            coarse,
+            world_from_root,
+            q,
+            parameter,
+            delta_m,
+            options,
+            3,
+        );
+        for candidate in candidates {
+            let mut trial_q = q.clone();
+            let mut trial_root = *world_from_root;
+            trial_q[parameter] = candidate.value;
+            for (other, value) in candidate.partner.into_iter().chain(candidate.deferred) {
+                trial_q[other] = value;
+            }
+            let mut spent = refine(
+                body,
+                coarse,
+                &mut trial_root,
+                &mut trial_q,
+                options.refine_band0_m(),
+                &RobotFitOptions {
+                    max_iterations: 15,
+                    ..options.clone()
+                },
+                false,
+            );
+            spent += refine(
+                body,
+                keypoints,
+                &mut trial_root,
+                &mut trial_q,
+                options.band_min_m,
+                options,
+                true,
+            );
+            iterations += spent;
+            let (trial_matches, trial_links, trial_observed) =
+                final_state(body, keypoints, &trial_root, &trial_q, options);
+            if trial_matches.len() >= matches.len() + options.min_link_points {
+                *world_from_root = trial_root;
+                *q = trial_q;
+                *matches = trial_matches;
+                *links = trial_links;
+                *observed = trial_observed;
+                break;
+            }
+        }
+    }
+    iterations
 }
 
 /// True when [`align_robot`] treats a start as not local and searches globally (detects the
@@ -895,11 +996,21 @@ const DISTINCT_BASE_M: f64 = 0.05;
 /// than two detection steps).
 const DISTINCT_DETECTION_RAD: f64 = 0.3;
 
+/// Single-flip states a global fit turns once more (see [`flip_check`]).
+const FLIP_RUNNERS_UP: usize = 2;
+
 /// Tries each revolute joint turned half a turn, with the joints below it searched again and
 /// everything refined, and keeps what explains the scan better. A wrist (or shoulder) whose
 /// three axes meet reaches the same link poses as (a + pi, -b, c + pi): continuous refinement
 /// cannot cross between the two, and on nearly symmetric links the searches may settle on the
-/// wrong one. Only joints whose window allows a half turn are tried. Returns the iterations.
+/// wrong one. Only joints whose window allows a half turn are tried.
+///
+/// With `global`, the best flipped states that were not kept are each flipped once more at every
+/// later joint: where the joint limits stop just short of a half turn (the iiwa's 170 degrees),
+/// the copy is not exact and the fit can sit on one pinned at the limits, with a chain of
+/// joints each a half turn off; turning one of them back alone leaves the rest of the chain
+/// explaining the scan no better, so only two flips together reach the true state.
+/// Returns the iterations.
 fn flip_check(
     body: &ArticulatedBody,
     keypoints: &[Point3<f64>],
@@ -927,65 +1038,110 @@ fn flip_check(
     let order = search_order(body);
     let mut best = score(world_from_root, q);
     let mut iterations = 0;
-    let refine_options = RobotFitOptions {
-        max_iterations: 20,
-        ..options.clone()
+    let mut runners_up: Vec<(i64, usize, Isometry3<f64>, Vec<f64>)> = Vec::new();
+    let flip = |base: &Isometry3<f64>, q: &[f64], index: usize, iterations: &mut usize| {
+        let (trial_base, trial_q, spent) = flipped(
+            body, keypoints, base, q, &order, index, delta_m, global, options,
+        )?;
+        *iterations += spent;
+        Some((score(&trial_base, &trial_q), trial_base, trial_q))
     };
-    let band0 = options.refine_band0_m();
-    for (index, &parameter) in order.iter().enumerate() {
-        let info = &body.parameters()[parameter];
-        if info.prismatic {
-            continue;
-        }
-        let placed = Placed::new(body, world_from_root, q);
-        let Some((window, _)) = Window::new(body, &placed, parameter, delta_m, options.voxel_m)
+    for index in 0..order.len() {
+        let Some((trial_score, trial_base, trial_q)) =
+            flip(world_from_root, q, index, &mut iterations)
         else {
             continue;
         };
-        if window.half < std::f64::consts::FRAC_PI_2 {
-            continue;
-        }
-        let flipped = q[parameter] + std::f64::consts::PI;
-        let flipped = if flipped > info.upper {
-            flipped - 2.0 * std::f64::consts::PI
-        } else {
-            flipped
-        };
-        if flipped < info.lower || flipped > info.upper {
-            continue;
-        }
-        let mut trial_q = q.clone();
-        let mut trial_base = *world_from_root;
-        trial_q[parameter] = flipped;
-        for &below in &order[index + 1..] {
-            search_joint(
-                body,
-                keypoints,
-                &trial_base,
-                &mut trial_q,
-                below,
-                delta_m,
-                global,
-                options,
-            );
-        }
-        iterations += refine(
-            body,
-            keypoints,
-            &mut trial_base,
-            &mut trial_q,
-            band0,
-            &refine_options,
-            false,
-        );
-        let trial_score = score(&trial_base, &trial_q);
         if trial_score > best {
             best = trial_score;
             *q = trial_q;
             *world_from_root = trial_base;
+        } else if global {
+            runners_up.push((trial_score, index, trial_base, trial_q));
+        }
+    }
+    runners_up.sort_by_key(|(trial_score, ..)| std::cmp::Reverse(*trial_score));
+    runners_up.truncate(FLIP_RUNNERS_UP);
+    for (_, first, base, first_q) in runners_up {
+        for second in first + 1..order.len() {
+            let Some((trial_score, trial_base, trial_q)) =
+                flip(&base, &first_q, second, &mut iterations)
+            else {
+                continue;
+            };
+            if trial_score > best {
+                best = trial_score;
+                *q = trial_q;
+                *world_from_root = trial_base;
+            }
         }
     }
     iterations
+}
+
+/// The state with the joint `order[index]` turned half a turn, the joints after it in `order`
+/// searched again and everything refined, with the iterations spent; `None` when the joint is
+/// prismatic or its window or limits do not allow a half turn.
+#[allow(clippy::too_many_arguments)]
+fn flipped(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    order: &[usize],
+    index: usize,
+    delta_m: f64,
+    global: bool,
+    options: &RobotFitOptions,
+) -> Option<(Isometry3<f64>, Vec<f64>, usize)> {
+    let parameter = order[index];
+    let info = &body.parameters()[parameter];
+    if info.prismatic {
+        return None;
+    }
+    let placed = Placed::new(body, world_from_root, q);
+    let (window, _) = Window::new(body, &placed, parameter, delta_m, options.voxel_m)?;
+    if window.half < std::f64::consts::FRAC_PI_2 {
+        return None;
+    }
+    let turned = q[parameter] + std::f64::consts::PI;
+    let turned = if turned > info.upper {
+        turned - 2.0 * std::f64::consts::PI
+    } else {
+        turned
+    };
+    if turned < info.lower || turned > info.upper {
+        return None;
+    }
+    let mut trial_q = q.to_vec();
+    let mut trial_base = *world_from_root;
+    trial_q[parameter] = turned;
+    for &below in &order[index + 1..] {
+        search_joint(
+            body,
+            keypoints,
+            &trial_base,
+            &mut trial_q,
+            below,
+            delta_m,
+            global,
+            options,
+        );
+    }
+    let refine_options = RobotFitOptions {
+        max_iterations: 20,
+        ..options.clone()
+    };
+    let spent = refine(
+        body,
+        keypoints,
+        &mut trial_base,
+        &mut trial_q,
+        options.refine_band0_m(),
+        &refine_options,
+        false,
+    );
+    Some((trial_base, trial_q, spent))
 }
 
 /// `world_from_root` turned about `axis` (root frame) to the orientation nearest `towards`'s:
