@@ -8,7 +8,9 @@
 //!    the other joints.
 //! 2. Down the tree, a beam search: each joint's value by a 1-D search (coarse grid, then fine
 //!    around each of the best local maxima) scored by how many scan points the links it moves
-//!    explain (points buried inside a link count against it), with everything above it fixed. A
+//!    explain (points buried inside a link count against it; points another link explains
+//!    count only where the moved links come nearer), with everything above it fixed; on the
+//!    coarse keypoints, or on the fine ones where few coarse ones are in reach (a wrist). A
 //!    link is only ever placed where its parent allows, which is what the independent alignment
 //!    lacked. After each joint the decided links (those every joint above has been searched
 //!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
@@ -372,35 +374,85 @@ impl<'a> Placed<'a> {
         if buried { -2 } else { 0 }
     }
 
+    /// [`Self::evidence`] of a point another link's surface is `claimed_m` from (infinite when
+    /// none is near): such a point counts for `links` only where they come nearer to it, and
+    /// never against them (links meet at their joints).
+    fn evidence_nearer(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        claimed_m: f64,
+        links: &[usize],
+    ) -> i64 {
+        if claimed_m.is_finite() {
+            self.evidence(point, band.min(claimed_m), inside_m.min(claimed_m), links)
+                .max(0)
+        } else {
+            self.evidence(point, band, inside_m, links)
+        }
+    }
+
     /// Whether `point` lies within `band` of the surface of one of `links`.
     fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
-        links.iter().any(|&link| {
+        self.distance_within(point, band, links).is_some()
+    }
+
+    /// The distance of `point` from the nearest surface of `links`, when within `band` (from
+    /// the links' distance grids where they answer that far).
+    fn distance_within(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> Option<f64> {
+        let mut nearest: Option<f64> = None;
+        for &link in links {
             let body_link = &self.body.links()[link];
             let Some(surface) = &body_link.surface else {
-                return false;
+                continue;
             };
-            if !self.within_reach(point, link, band) {
-                return false;
+            let limit = nearest.unwrap_or(band);
+            if !self.within_reach(point, link, limit) {
+                continue;
             }
             let local = self.inverse[link] * point;
-            if let Some(grid) = body_link.grid.as_ref().filter(|g| band <= g.reliable_m()) {
-                return grid
-                    .signed_distance_m(&local)
-                    .is_some_and(|distance| distance.abs() <= band);
+            let distance =
+                if let Some(grid) = body_link.grid.as_ref().filter(|g| band <= g.reliable_m()) {
+                    grid.signed_distance_m(&local).map(f64::abs)
+                } else {
+                    let (lower, upper) = surface.bounds();
+                    let in_box = (0..3)
+                        .all(|a| local[a] >= lower[a] - limit && local[a] <= upper[a] + limit);
+                    in_box
+                        .then(|| surface.closest_point_within(&local, limit))
+                        .flatten()
+                        .map(|closest| closest.signed_distance.abs())
+                };
+            if let Some(distance) = distance.filter(|&d| d <= limit) {
+                nearest = Some(distance);
             }
-            let (lower, upper) = surface.bounds();
-            (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band)
-                && surface.closest_point_within(&local, band).is_some()
-        })
+        }
+        nearest
     }
 }
 
 const EDGE_REJECTION_M: f64 = 1e-3;
 
+/// The scan's keypoints at two densities.
+#[derive(Debug, Clone, Copy)]
+struct Keypoints<'a> {
+    /// One per voxel three keypoint voxels wide: what the refinements before the last, the
+    /// beam and the checks after it score on.
+    coarse: &'a [Point3<f64>],
+    /// One per keypoint voxel: what a local joint search samples near the links it moves (a
+    /// wrist holds a handful of coarse keypoints, no more than the outliers around it).
+    fine: &'a [Point3<f64>],
+}
+
 /// Points the coarse level of a joint search scores candidates on (a stride sample).
 const COARSE_SEARCH_POINTS: usize = 1500;
 /// Points the fine level scores on: enough that a step of the fine grid changes the count.
 const FINE_SEARCH_POINTS: usize = 4000;
+/// Fine keypoints in reach of the moved links a joint search considers, at most (a stride
+/// sample): four times the fine level's, so that its sample stays full when the links not moved
+/// explain most of them.
+const IN_REACH_POINTS: usize = 16000;
 
 fn check_inputs(
     body: &ArticulatedBody,
@@ -484,6 +536,10 @@ pub fn align_robot(
     }
     let keypoints = voxel_representatives(&near, options.voxel_m);
     let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
+    let scan = Keypoints {
+        coarse: &coarse,
+        fine: &keypoints,
+    };
     let start_mesh = body.rigid_mesh(q0);
     let global = start_mesh
         .as_ref()
@@ -509,7 +565,7 @@ pub fn align_robot(
         options,
     ));
     let (mut world_from_root, mut q) =
-        beam_search(body, &coarse, &hypotheses, q0, delta_m, global, options);
+        beam_search(body, scan, &hypotheses, q0, delta_m, global, options);
     // Until the last refinement the surfaces come from the links' distance grids: a
     // millimetre of blur at edges costs nothing while the joints are still being searched.
     let band0 = options.refine_band0_m();
@@ -532,7 +588,7 @@ pub fn align_robot(
         for parameter in search_order(body) {
             search_joint(
                 body,
-                &coarse,
+                scan,
                 &world_from_root,
                 &mut q,
                 parameter,
@@ -553,7 +609,7 @@ pub fn align_robot(
     }
     iterations += flip_check(
         body,
-        &coarse,
+        scan,
         &mut world_from_root,
         &mut q,
         delta_m,
@@ -576,7 +632,7 @@ pub fn align_robot(
     if global {
         iterations += second_look(
             body,
-            (&coarse, &keypoints),
+            scan,
             &mut world_from_root,
             &mut q,
             delta_m,
@@ -648,7 +704,7 @@ fn final_state(
 #[allow(clippy::type_complexity)]
 fn second_look(
     body: &ArticulatedBody,
-    (coarse, keypoints): (&[Point3<f64>], &[Point3<f64>]),
+    scan: Keypoints,
     world_from_root: &mut Isometry3<f64>,
     q: &mut Vec<f64>,
     delta_m: f64,
@@ -664,7 +720,7 @@ fn second_look(
         }
         let candidates = global_joint_candidates(
             body,
-            coarse,
+            scan,
             world_from_root,
             q,
             parameter,
@@ -681,7 +737,7 @@ fn second_look(
             }
             let mut spent = refine(
                 body,
-                coarse,
+                scan.coarse,
                 &mut trial_root,
                 &mut trial_q,
                 options.refine_band0_m(),
@@ -693,7 +749,7 @@ fn second_look(
             );
             spent += refine(
                 body,
-                keypoints,
+                scan.fine,
                 &mut trial_root,
                 &mut trial_q,
                 options.band_min_m,
@@ -702,7 +758,7 @@ fn second_look(
             );
             iterations += spent;
             let (trial_matches, trial_links, trial_observed) =
-                final_state(body, keypoints, &trial_root, &trial_q, options);
+                final_state(body, scan.fine, &trial_root, &trial_q, options);
             if trial_matches.len() >= matches.len() + options.min_link_points {
                 *world_from_root = trial_root;
                 *q = trial_q;
@@ -1013,7 +1069,7 @@ const FLIP_RUNNERS_UP: usize = 2;
 /// Returns the iterations.
 fn flip_check(
     body: &ArticulatedBody,
-    keypoints: &[Point3<f64>],
+    scan: Keypoints,
     world_from_root: &mut Isometry3<f64>,
     q: &mut Vec<f64>,
     delta_m: f64,
@@ -1027,7 +1083,7 @@ fn flip_check(
     let score = |base: &Isometry3<f64>, q: &[f64]| {
         coverage(
             body,
-            keypoints,
+            scan.coarse,
             base,
             q,
             &with_surface,
@@ -1040,9 +1096,8 @@ fn flip_check(
     let mut iterations = 0;
     let mut runners_up: Vec<(i64, usize, Isometry3<f64>, Vec<f64>)> = Vec::new();
     let flip = |base: &Isometry3<f64>, q: &[f64], index: usize, iterations: &mut usize| {
-        let (trial_base, trial_q, spent) = flipped(
-            body, keypoints, base, q, &order, index, delta_m, global, options,
-        )?;
+        let (trial_base, trial_q, spent) =
+            flipped(body, scan, base, q, &order, index, delta_m, global, options)?;
         *iterations += spent;
         Some((score(&trial_base, &trial_q), trial_base, trial_q))
     };
@@ -1085,7 +1140,7 @@ fn flip_check(
 #[allow(clippy::too_many_arguments)]
 fn flipped(
     body: &ArticulatedBody,
-    keypoints: &[Point3<f64>],
+    scan: Keypoints,
     world_from_root: &Isometry3<f64>,
     q: &[f64],
     order: &[usize],
@@ -1119,7 +1174,7 @@ fn flipped(
     for &below in &order[index + 1..] {
         search_joint(
             body,
-            keypoints,
+            scan,
             &trial_base,
             &mut trial_q,
             below,
@@ -1134,7 +1189,7 @@ fn flipped(
     };
     let spent = refine(
         body,
-        keypoints,
+        scan.coarse,
         &mut trial_base,
         &mut trial_q,
         options.refine_band0_m(),
@@ -1215,7 +1270,7 @@ fn same_state(
 /// refined, and the one explaining the most points wins.
 fn beam_search(
     body: &ArticulatedBody,
-    keypoints: &[Point3<f64>],
+    scan: Keypoints,
     hypotheses: &[Isometry3<f64>],
     q0: &[f64],
     delta_m: f64,
@@ -1223,8 +1278,8 @@ fn beam_search(
     options: &RobotFitOptions,
 ) -> (Isometry3<f64>, Vec<f64>) {
     let width = options.beam_width.max(1);
-    let stride = keypoints.len().div_ceil(BEAM_SCORE_POINTS).max(1);
-    let sample: Vec<Point3<f64>> = keypoints.iter().step_by(stride).copied().collect();
+    let stride = scan.coarse.len().div_ceil(BEAM_SCORE_POINTS).max(1);
+    let sample: Vec<Point3<f64>> = scan.coarse.iter().step_by(stride).copied().collect();
     let band = 3.0 * options.voxel_m;
     let with_surface: Vec<usize> = (0..body.links().len())
         .filter(|&l| body.links()[l].surface.is_some())
@@ -1237,11 +1292,9 @@ fn beam_search(
         for (base, q) in &beam {
             let peaks = width.min(PEAKS_PER_STATE);
             let candidates = if global {
-                global_joint_candidates(
-                    body, keypoints, base, q, parameter, delta_m, options, peaks,
-                )
+                global_joint_candidates(body, scan, base, q, parameter, delta_m, options, peaks)
             } else {
-                joint_candidates(body, keypoints, base, q, parameter, delta_m, options, peaks)
+                joint_candidates(body, scan, base, q, parameter, delta_m, options, peaks)
             };
             for candidate in candidates {
                 let mut q = q.clone();
@@ -1370,7 +1423,7 @@ fn own_links(body: &ArticulatedBody, parameter: usize) -> Vec<usize> {
 #[allow(clippy::too_many_arguments)]
 fn search_joint(
     body: &ArticulatedBody,
-    keypoints: &[Point3<f64>],
+    scan: Keypoints,
     world_from_root: &Isometry3<f64>,
     q: &mut [f64],
     parameter: usize,
@@ -1381,7 +1434,7 @@ fn search_joint(
     let candidates = if global {
         global_joint_candidates(
             body,
-            keypoints,
+            scan,
             world_from_root,
             q,
             parameter,
@@ -1392,7 +1445,7 @@ fn search_joint(
     } else {
         joint_candidates(
             body,
-            keypoints,
+            scan,
             world_from_root,
             q,
             parameter,
@@ -1447,7 +1500,7 @@ fn coarse_peaks(
 #[allow(clippy::too_many_arguments)]
 fn joint_candidates(
     body: &ArticulatedBody,
-    keypoints: &[Point3<f64>],
+    scan: Keypoints,
     world_from_root: &Isometry3<f64>,
     q: &[f64],
     parameter: usize,
@@ -1465,16 +1518,41 @@ fn joint_candidates(
         .filter(|link| !moved.contains(link))
         .collect();
     let coarse_band = 3.0 * options.voxel_m;
-    // Points another link already explains are nobody else's to claim: without this a small
-    // wrist link scores by lying on its parent's surface.
-    let nearby: Vec<Point3<f64>> = keypoints
-        .iter()
-        .filter(|p| {
-            (*p - origin).norm() <= window.reach_m.max(0.0) + window.sweep_m() + coarse_band
-        })
+    let radius_m = window.reach_m.max(0.0) + window.sweep_m() + coarse_band;
+    let in_reach = |points: &[Point3<f64>]| -> Vec<Point3<f64>> {
+        points
+            .iter()
+            .filter(|p| (*p - origin).norm() <= radius_m)
+            .copied()
+            .collect()
+    };
+    // Points another link already explains (within the coarse band) are nobody else's to
+    // claim: without this a small wrist link scores by lying on its parent's surface.
+    let mut nearby: Vec<(Point3<f64>, f64)> = in_reach(scan.coarse)
+        .into_iter()
         .filter(|p| !placed.supports(p, coarse_band, &others))
-        .copied()
+        .map(|p| (p, f64::INFINITY))
         .collect();
+    if nearby.len() < FINE_SEARCH_POINTS {
+        // So few that the fine level would score every one: the coarse keypoints are then all
+        // the search sees, and on them a small link (a wrist) is a handful of points, no more
+        // than the outliers around it. The fine keypoints then, and a point belongs to the
+        // nearest surface: one another link explains is the moved links' where they come
+        // nearer to it (a wrist nested in its parent's fork would lose most of its points to
+        // the band). A stride bounds the work where the window is wide.
+        let fine = in_reach(scan.fine);
+        let stride = fine.len().div_ceil(IN_REACH_POINTS).max(1);
+        nearby = fine
+            .into_iter()
+            .step_by(stride)
+            .map(|p| {
+                let claimed_m = placed
+                    .distance_within(&p, coarse_band, &others)
+                    .unwrap_or(f64::INFINITY);
+                (p, claimed_m)
+            })
+            .collect();
+    }
     if nearby.is_empty() {
         return Vec::new();
     }
@@ -1487,14 +1565,14 @@ fn joint_candidates(
     };
     // The coarse level only has to find the right basin: a sample of the points does.
     let stride = nearby.len().div_ceil(COARSE_SEARCH_POINTS);
-    let sample: Vec<Point3<f64>> = nearby.iter().step_by(stride).copied().collect();
+    let sample: Vec<(Point3<f64>, f64)> = nearby.iter().step_by(stride).copied().collect();
     let fine_stride = nearby.len().div_ceil(FINE_SEARCH_POINTS);
-    let fine: Vec<Point3<f64>> = nearby.iter().step_by(fine_stride).copied().collect();
-    let count_points = |trial: &[f64], band: f64, points: &[Point3<f64>]| -> i64 {
+    let fine: Vec<(Point3<f64>, f64)> = nearby.iter().step_by(fine_stride).copied().collect();
+    let count_points = |trial: &[f64], band: f64, points: &[(Point3<f64>, f64)]| -> i64 {
         let placed = Placed::new(body, world_from_root, trial);
         points
             .iter()
-            .map(|p| placed.evidence(p, band, coarse_band, &moved))
+            .map(|(p, claimed_m)| placed.evidence_nearer(p, band, coarse_band, *claimed_m, &moved))
             .sum()
     };
     let current = q[parameter];
@@ -1607,7 +1685,7 @@ const GLOBAL_SEARCH_POINTS: usize = 6000;
 #[allow(clippy::too_many_arguments)]
 fn global_joint_candidates(
     body: &ArticulatedBody,
-    keypoints: &[Point3<f64>],
+    scan: Keypoints,
     world_from_root: &Isometry3<f64>,
     q: &[f64],
     parameter: usize,
@@ -1618,7 +1696,7 @@ fn global_joint_candidates(
     let local = || {
         joint_candidates(
             body,
-            keypoints,
+            scan,
             world_from_root,
             q,
             parameter,
@@ -1630,6 +1708,8 @@ fn global_joint_candidates(
     if body.parameters()[parameter].prismatic {
         return local();
     }
+    // Every joint anywhere in its window: the coarse keypoints, strided, are enough to find it.
+    let keypoints = scan.coarse;
     let placed = Placed::new(body, world_from_root, q);
     let own = own_surfaces(body, parameter);
     let child = revolute_child(body, &placed, parameter, delta_m, options);
@@ -2169,8 +2249,104 @@ fn observed_parameters(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kinematics::{PackageMap, RobotModel};
     use crate::robots::ShippedRobot;
     use crate::trials::TrialRng;
+    use crate::trials::robot_scan::{RobotScanOptions, scan_robot};
+
+    /// A robot of primitives whose wrist turns between the two plates of its forearm's fork, a
+    /// millimetre from each (as an industrial robot's wrist sits in its forearm), with a flange
+    /// of 20 mm radius beyond it.
+    const FORKED_WRIST_URDF: &str = r#"<robot name="forked_wrist">
+  <link name="base"><visual><origin xyz="0 0 0.15"/><geometry><box size="0.4 0.4 0.3"/></geometry></visual></link>
+  <link name="column"><visual><origin xyz="0.05 0 0.1"/><geometry><box size="0.3 0.25 0.2"/></geometry></visual></link>
+  <link name="upper_arm"><visual><origin xyz="0 0 0.3"/><geometry><box size="0.1 0.12 0.6"/></geometry></visual></link>
+  <link name="elbow"><visual><origin xyz="0.05 0 0"/><geometry><box size="0.2 0.14 0.14"/></geometry></visual></link>
+  <link name="forearm">
+    <visual><origin xyz="0.2 0 0" rpy="0 1.5707963 0"/><geometry><cylinder radius="0.045" length="0.4"/></geometry></visual>
+    <visual><origin xyz="0.43 0.041 0"/><geometry><box size="0.06 0.01 0.06"/></geometry></visual>
+    <visual><origin xyz="0.43 -0.041 0"/><geometry><box size="0.06 0.01 0.06"/></geometry></visual>
+  </link>
+  <link name="wrist"><visual><origin rpy="1.5707963 0 0"/><geometry><cylinder radius="0.028" length="0.07"/></geometry></visual></link>
+  <link name="flange"><visual><origin xyz="0.025 0 0" rpy="0 1.5707963 0"/><geometry><cylinder radius="0.02" length="0.05"/></geometry></visual></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="column"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="column"/><child link="upper_arm"/>
+    <origin xyz="0 0 0.2"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="upper_arm"/><child link="elbow"/>
+    <origin xyz="0 0 0.6"/><axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5" effort="1" velocity="1"/></joint>
+  <joint name="j4" type="revolute"><parent link="elbow"/><child link="forearm"/>
+    <origin xyz="0.15 0 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j5" type="revolute"><parent link="forearm"/><child link="wrist"/>
+    <origin xyz="0.43 0 0"/><axis xyz="0 1 0"/><limit lower="-2.1" upper="2.1" effort="1" velocity="1"/></joint>
+  <joint name="j6" type="revolute"><parent link="wrist"/><child link="flange"/>
+    <origin xyz="0.028 0 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>"#;
+
+    #[test]
+    fn a_wrist_nested_in_its_forearms_fork_keeps_the_points_nearer_to_it() {
+        let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
+        let body = ArticulatedBody::from_model(&model).unwrap();
+        let world_from_root = Isometry3::translation(0.2, -0.1, 0.0);
+        let q_true = [0.0, 0.3, 0.4, 0.0, 0.6, 0.0];
+        let cloud = scan_robot(
+            &body,
+            &world_from_root,
+            &q_true,
+            &RobotScanOptions::default(),
+        );
+        let options = RobotFitOptions::default();
+        let fine = voxel_representatives(&cloud, options.voxel_m);
+        let wrist_joint = 4;
+        let moved = body.moved_by(wrist_joint);
+        let others: Vec<usize> = (0..body.links().len())
+            .filter(|link| !moved.contains(link))
+            .collect();
+        let placed = Placed::new(&body, &world_from_root, &q_true);
+        let band = 3.0 * options.voxel_m;
+        let on_wrist: Vec<&Point3<f64>> = fine
+            .iter()
+            .filter(|p| placed.supports(p, 0.002, &moved))
+            .collect();
+        let claimed: Vec<f64> = on_wrist
+            .iter()
+            .map(|p| {
+                placed
+                    .distance_within(p, band, &others)
+                    .unwrap_or(f64::INFINITY)
+            })
+            .collect();
+        // The fixture is what it says: the fork comes within the band of a third of the wrist's
+        // points (of four fifths on the ABB IRB 1600's, where this was found).
+        let within_band = claimed.iter().filter(|c| c.is_finite()).count();
+        assert!(
+            on_wrist.len() > 100 && 3 * within_band > on_wrist.len(),
+            "{within_band} of {} wrist points near the fork",
+            on_wrist.len()
+        );
+        // At the true value nearly all of them count for the wrist: they lie nearer to it.
+        let counted: i64 = on_wrist
+            .iter()
+            .zip(&claimed)
+            .map(|(p, &c)| placed.evidence_nearer(p, band, band, c, &moved))
+            .sum();
+        assert!(
+            counted as f64 >= 0.9 * on_wrist.len() as f64,
+            "{counted} of {} wrist points counted",
+            on_wrist.len()
+        );
+        // And the fit finds the wrist from a radian away. (With every point near the fork taken
+        // away it did here too, on the points left; on the ABB's wrist, where four fifths were
+        // taken, it did not: 4 of 10 trials at 200 mm, docs/articulated-trials.md.)
+        let mut q0 = q_true.to_vec();
+        q0[wrist_joint] -= 1.0;
+        let fit = align_robot(&body, &cloud, &world_from_root, &q0, 0.2, &options).unwrap();
+        assert!(
+            (fit.q[wrist_joint] - q_true[wrist_joint]).abs() < 0.01,
+            "{:?}",
+            fit.q
+        );
+    }
 
     #[test]
     fn the_grids_only_rule_links_out_of_exact_queries_and_approximate_the_rest_closely() {
