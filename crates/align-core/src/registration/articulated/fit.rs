@@ -395,40 +395,48 @@ impl<'a> Placed<'a> {
 
     /// Whether `point` lies within `band` of the surface of one of `links`.
     fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
-        self.distance_within(point, band, links).is_some()
+        links
+            .iter()
+            .any(|&link| self.link_distance(point, band, band, link).is_some())
     }
 
-    /// The distance of `point` from the nearest surface of `links`, when within `band` (from
-    /// the links' distance grids where they answer that far).
+    /// The distance of `point` from the nearest surface of `links`, when within `band`.
     fn distance_within(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> Option<f64> {
-        let mut nearest: Option<f64> = None;
-        for &link in links {
-            let body_link = &self.body.links()[link];
-            let Some(surface) = &body_link.surface else {
-                continue;
-            };
-            let limit = nearest.unwrap_or(band);
-            if !self.within_reach(point, link, limit) {
-                continue;
-            }
-            let local = self.inverse[link] * point;
-            let distance =
-                if let Some(grid) = body_link.grid.as_ref().filter(|g| band <= g.reliable_m()) {
-                    grid.signed_distance_m(&local).map(f64::abs)
-                } else {
-                    let (lower, upper) = surface.bounds();
-                    let in_box = (0..3)
-                        .all(|a| local[a] >= lower[a] - limit && local[a] <= upper[a] + limit);
-                    in_box
-                        .then(|| surface.closest_point_within(&local, limit))
-                        .flatten()
-                        .map(|closest| closest.signed_distance.abs())
-                };
-            if let Some(distance) = distance.filter(|&d| d <= limit) {
-                nearest = Some(distance);
-            }
+        links.iter().fold(None, |nearest, &link| {
+            self.link_distance(point, band, nearest.unwrap_or(band), link)
+                .or(nearest)
+        })
+    }
+
+    /// The distance of `point` from `link`'s surface when within `limit` (no more than `band`):
+    /// from its distance grid when that answers as far as `band`, else exactly.
+    fn link_distance(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        limit: f64,
+        link: usize,
+    ) -> Option<f64> {
+        let body_link = &self.body.links()[link];
+        let surface = body_link.surface.as_ref()?;
+        if !self.within_reach(point, link, limit) {
+            return None;
         }
-        nearest
+        let local = self.inverse[link] * point;
+        let distance =
+            if let Some(grid) = body_link.grid.as_ref().filter(|g| band <= g.reliable_m()) {
+                grid.signed_distance_m(&local)?.abs()
+            } else {
+                let (lower, upper) = surface.bounds();
+                if !(0..3).all(|a| local[a] >= lower[a] - limit && local[a] <= upper[a] + limit) {
+                    return None;
+                }
+                surface
+                    .closest_point_within(&local, limit)?
+                    .signed_distance
+                    .abs()
+            };
+        (distance <= limit).then_some(distance)
     }
 }
 
