@@ -9,29 +9,10 @@ use std::time::Duration;
 use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
-use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
+use align_core::trials::robot_scan::{RobotScanOptions, scan_robot_of_about};
 use align_core::trials::robot_trials::perturb_robot;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-
-/// The scan spacing that gives about `target` points, found by scaling with the point density.
-fn scan_of_about(
-    body: &ArticulatedBody,
-    truth: &Isometry3<f64>,
-    q: &[f64],
-    target: usize,
-) -> Vec<nalgebra::Point3<f64>> {
-    let mut options = RobotScanOptions::default();
-    for _ in 0..4 {
-        let cloud = scan_robot(body, truth, q, &options);
-        let ratio = cloud.len() as f64 / target as f64;
-        if (ratio - 1.0).abs() < 0.03 {
-            return cloud;
-        }
-        options.spacing_m *= ratio.sqrt();
-    }
-    scan_robot(body, truth, q, &options)
-}
 
 fn articulated(c: &mut Criterion) {
     let truth = Isometry3::from_parts(
@@ -48,7 +29,13 @@ fn articulated(c: &mut Criterion) {
             b.iter(|| black_box(ArticulatedBody::from_model(&model).expect("surfaces")))
         });
         let body = ArticulatedBody::from_model(&model).expect("surfaces");
-        let cloud = scan_of_about(&body, &truth, &robot.home(), 20_000);
+        let cloud = scan_robot_of_about(
+            &body,
+            &truth,
+            &robot.home(),
+            &RobotScanOptions::default(),
+            20_000,
+        );
         let mut rng = TrialRng::new(9);
         let (start, q0) = perturb_robot(&body, &truth, &robot.home(), 0.1, &mut rng);
         let options = RobotFitOptions::default();

@@ -111,6 +111,29 @@ fn sample_mesh(
     }
 }
 
+/// [`scan_robot`] with the spacing scaled (from `options.spacing_m`, a few tries) until the scan
+/// holds about `target_points` points (within 3%, else the last try): a benchmark's cloud size
+/// stays put when the robot or the clutter changes.
+pub fn scan_robot_of_about(
+    body: &ArticulatedBody,
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    options: &RobotScanOptions,
+    target_points: usize,
+) -> Vec<Point3<f64>> {
+    let mut options = options.clone();
+    for _ in 0..4 {
+        let cloud = scan_robot(body, world_from_root, q, &options);
+        // Points scale with the inverse square of the spacing on surfaces.
+        let ratio = cloud.len() as f64 / target_points.max(1) as f64;
+        if (ratio - 1.0).abs() < 0.03 || cloud.is_empty() {
+            return cloud;
+        }
+        options.spacing_m *= ratio.sqrt();
+    }
+    scan_robot(body, world_from_root, q, &options)
+}
+
 /// A scan of the robot at `world_from_root` and joints `q`, with the clutter the options ask for.
 pub fn scan_robot(
     body: &ArticulatedBody,
