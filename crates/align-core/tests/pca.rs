@@ -5,7 +5,7 @@
 
 use align_core::geometry::Mesh;
 use align_core::geometry::shapes::extrude;
-use align_core::registration::pca::{PcaOptions, PcaStep, align_cloud};
+use align_core::registration::pca::{PcaOptions, PcaStep, align_cloud, pose_candidates_spread};
 use align_core::trials::clouds::{ScanOptions, scan_part};
 use align_core::trials::{TrialRng, displace_about_centroid, random_displacement};
 use nalgebra::{Isometry3, Point3};
@@ -128,6 +128,64 @@ fn clutter_and_ten_percent_outliers_still_align_below_a_millimetre() {
                 result.iterations
             );
         }
+    }
+}
+
+#[test]
+fn spread_candidates_find_a_part_three_times_its_radius_from_the_start_among_clutter() {
+    let mesh = step_block();
+    let truth = truth();
+    let scan = ScanOptions {
+        noise_sigma_m: 0.0003,
+        outlier_fraction: 0.1,
+        floor: true,
+        neighbour: true,
+        scanners: vec![
+            Point3::new(0.0, 0.0, 1.5),
+            Point3::new(1.5, -1.0, 1.0),
+            Point3::new(1.5, 1.0, 0.8),
+        ],
+        ..ScanOptions::default()
+    };
+    let cloud = scan_part(&mesh, &truth, &scan);
+    let mut rng = TrialRng::new(21);
+    let bound_m = 0.5;
+    for _ in 0..3 {
+        // Off by 0.35-0.4 m (the block's radius is about 0.13 m) and turned by up to 0.3 rad.
+        let offset = loop {
+            let v = nalgebra::Vector3::new(
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+            );
+            if v.norm() > 0.1 {
+                break v.normalize() * (0.35 + 0.05 * rng.uniform());
+            }
+        };
+        let turn = nalgebra::Vector3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 0.17;
+        let start = Isometry3::new(truth.translation.vector + offset, turn) * truth.rotation;
+        // The robot fit's options for its proximal links: the band reaches its floor within the
+        // candidates' 40 iterations.
+        let options = PcaOptions {
+            voxel_m: 0.015,
+            schedule_iterations: 40,
+            ..PcaOptions::default()
+        };
+        let candidates = pose_candidates_spread(&mesh, &cloud, &start, bound_m, &options, 4, 0.05);
+        assert!(candidates.len() <= 4);
+        let best = candidates
+            .iter()
+            .map(|c| {
+                let (position, rotation) = errors(c, &truth);
+                position.hypot(rotation * mesh.radius_m())
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            best < 5e-3,
+            "start {:.3} m off: nearest of {} candidates {best:e} m",
+            offset.norm(),
+            candidates.len()
+        );
     }
 }
 

@@ -372,20 +372,100 @@ fn explore(
     (scored, candidates.len() - 1)
 }
 
-/// Rigid poses of `mesh` in `cloud` within what `delta0_m` allows from `start`, best consensus
-/// first, at most `count` of them and no two within `distinct_m` of each other (thesis pose
-/// distance): the ends of the short runs of the exploration, for a caller that checks several.
-pub fn pose_candidates(
+/// Starts spread in translation that [`pose_candidates_spread`] screens, at most.
+const SPREAD_STARTS: usize = 512;
+
+/// [`pose_candidates`] for a start that may be off by more than the part is big (`bound_m`, the
+/// largest distance of the part's origin from where the start puts it, beyond its radius). A
+/// run from the start in a band that wide is pulled by everything the band holds (a neighbouring
+/// object, the rest of a robot) and settles where the part is not: on a boxy robot base the best
+/// such end scored 600-700 where the true pose scores 930-960 (exploratory runs). The runs start
+/// instead from the start moved to the points of a cubic grid within `bound_m` (spacing half the
+/// part's radius, coarser where that would make more than [`SPREAD_STARTS`]), each in a band of
+/// one spacing: a short run on sparse keypoints screens them, and the best `4 count` distinct
+/// ends run again as the exploration's runs do.
+pub fn pose_candidates_spread(
     mesh: &Mesh,
     cloud: &[Point3<f64>],
     start: &Isometry3<f64>,
-    delta0_m: f64,
+    bound_m: f64,
     options: &PcaOptions,
     count: usize,
     distinct_m: f64,
 ) -> Vec<Isometry3<f64>> {
-    let (scored, _) = explore(mesh, cloud, start, delta0_m, options);
     let radius_m = mesh.radius_m();
+    // A ball of radius bound holds about 4.19 (bound / spacing)^3 grid points.
+    let crowded_m = bound_m * (4.19 / SPREAD_STARTS as f64).cbrt();
+    let spacing_m = (radius_m / 2.0).max(crowded_m);
+    if !(spacing_m.is_finite() && spacing_m > 0.0) {
+        return Vec::new();
+    }
+    let steps = (bound_m / spacing_m).floor() as i32;
+    let mut starts = Vec::new();
+    for i in -steps..=steps {
+        for j in -steps..=steps {
+            for k in -steps..=steps {
+                let offset = Vector3::new(f64::from(i), f64::from(j), f64::from(k)) * spacing_m;
+                if offset.norm() <= bound_m {
+                    starts.push(Isometry3::from_parts(
+                        Translation3::from(start.translation.vector + offset),
+                        start.rotation,
+                    ));
+                }
+            }
+        }
+    }
+    // The screening's keypoints: a sixth of the part's radius apart (some hundred on its
+    // surface), between the exploration's spacing and twice it.
+    let sparse_m = (radius_m / 6.0)
+        .max(options.voxel_m * 3.0)
+        .min(options.voxel_m * 6.0);
+    let sparse = voxel_representatives(cloud, sparse_m);
+    let keypoints = voxel_representatives(cloud, options.voxel_m * 3.0);
+    let band = (options.voxel_m * 2.0).max(options.delta_min_m * 0.3);
+    let screen = PcaOptions {
+        schedule_iterations: 10,
+        max_iterations: 10,
+        window: 3,
+        tolerance_m: 1e-4,
+        parallel: false,
+        ..options.clone()
+    };
+    let mut screened: Vec<(f64, Isometry3<f64>)> = starts
+        .par_iter()
+        .map(|start| {
+            let run = run_schedule(mesh, &sparse, start, spacing_m, &screen);
+            (consensus(mesh, &sparse, &run.pose, 2.0 * band), run.pose)
+        })
+        .collect();
+    screened.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let finalists = distinct_poses(screened, 4 * count, radius_m, distinct_m);
+    let short = PcaOptions {
+        max_iterations: 40,
+        window: 3,
+        tolerance_m: 1e-5,
+        parallel: false,
+        ..options.clone()
+    };
+    let mut scored: Vec<(f64, Isometry3<f64>)> = finalists
+        .par_iter()
+        .map(|pose| {
+            let run = run_schedule(mesh, &keypoints, pose, spacing_m / 2.0, &short);
+            (consensus(mesh, &keypoints, &run.pose, band), run.pose)
+        })
+        .collect();
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    distinct_poses(scored, count, radius_m, distinct_m)
+}
+
+/// The poses of `scored` (best first) no two within `distinct_m` (thesis pose distance), at most
+/// `count`.
+fn distinct_poses(
+    scored: Vec<(f64, Isometry3<f64>)>,
+    count: usize,
+    radius_m: f64,
+    distinct_m: f64,
+) -> Vec<Isometry3<f64>> {
     let mut kept: Vec<Isometry3<f64>> = Vec::new();
     for (_, pose) in scored {
         if kept.len() == count {
@@ -399,6 +479,22 @@ pub fn pose_candidates(
         }
     }
     kept
+}
+
+/// Rigid poses of `mesh` in `cloud` within what `delta0_m` allows from `start`, best consensus
+/// first, at most `count` of them and no two within `distinct_m` of each other (thesis pose
+/// distance): the ends of the short runs of the exploration, for a caller that checks several.
+pub fn pose_candidates(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+    count: usize,
+    distinct_m: f64,
+) -> Vec<Isometry3<f64>> {
+    let (scored, _) = explore(mesh, cloud, start, delta0_m, options);
+    distinct_poses(scored, count, mesh.radius_m(), distinct_m)
 }
 
 const EDGE_REJECTION_M: f64 = 1e-3;
