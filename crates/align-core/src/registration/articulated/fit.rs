@@ -81,7 +81,8 @@ pub struct RobotFitOptions {
     pub parallel: bool,
     /// The rigid first alignment of the whole robot.
     pub base: PcaOptions,
-    /// The exploration for rigid alignments of the proximal links (`base_candidates`).
+    /// The exploration and the spread of starts for rigid alignments of the proximal links
+    /// (`base_candidates` from each).
     pub proximal: PcaOptions,
     /// The detection of the proximal links anywhere near the start (point pair features),
     /// which gives the base candidates instead when the start is not local (delta beyond the
@@ -118,7 +119,8 @@ impl Default for RobotFitOptions {
                 window: 5,
                 ..PcaOptions::default()
             },
-            // The proximal links are small: 15 mm keypoints (45 mm for the exploration).
+            // The proximal links are small: 15 mm keypoints (45 mm for the exploration's and the
+            // spread's runs, 45-90 mm for the spread's screening).
             proximal: PcaOptions {
                 voxel_m: 0.015,
                 schedule_iterations: 40,
