@@ -9,16 +9,14 @@ use std::time::Duration;
 use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
-use align_core::trials::robot_scan::{RobotScanOptions, scan_robot_of_about};
 use align_core::trials::robot_trials::perturb_robot;
 use criterion::{Criterion, criterion_group, criterion_main};
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+#[path = "common/robot_scene.rs"]
+mod robot_scene;
+use robot_scene::{RobotScene, robot_scene};
 
 fn articulated(c: &mut Criterion) {
-    let truth = Isometry3::from_parts(
-        Translation3::new(0.2, -0.1, 0.0),
-        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
-    );
     let mut group = c.benchmark_group("align_robot");
     group
         .sample_size(20)
@@ -28,14 +26,11 @@ fn articulated(c: &mut Criterion) {
         group.bench_function(format!("{}_prepare_body", robot.name()), |b| {
             b.iter(|| black_box(ArticulatedBody::from_model(&model).expect("surfaces")))
         });
-        let body = ArticulatedBody::from_model(&model).expect("surfaces");
-        let cloud = scan_robot_of_about(
-            &body,
-            &truth,
-            &robot.home(),
-            &RobotScanOptions::default(),
-            20_000,
-        );
+        let RobotScene {
+            body,
+            world_from_root: truth,
+            cloud,
+        } = robot_scene(robot);
         let mut rng = TrialRng::new(9);
         let (start, q0) = perturb_robot(&body, &truth, &robot.home(), 0.1, &mut rng);
         let options = RobotFitOptions::default();

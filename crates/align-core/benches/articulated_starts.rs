@@ -8,12 +8,14 @@
 
 use std::time::Instant;
 
-use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use align_core::registration::articulated::{RobotFitOptions, align_robot};
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
-use align_core::trials::robot_scan::{RobotScanOptions, scan_robot_of_about};
 use align_core::trials::robot_trials::{perturb_robot, surface_deviation_m};
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+#[path = "common/robot_scene.rs"]
+mod robot_scene;
+use robot_scene::{RobotScene, robot_scene};
 
 fn argument(name: &str, default: usize) -> usize {
     let args: Vec<String> = std::env::args().collect();
@@ -39,21 +41,13 @@ fn median(values: &mut [f64]) -> f64 {
 fn main() {
     let runs = argument("--runs", 3).max(1);
     let starts = argument("--starts", 20).max(1);
-    let truth = Isometry3::from_parts(
-        Translation3::new(0.2, -0.1, 0.0),
-        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
-    );
     let options = RobotFitOptions::default();
     for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
-        let model = robot.model().expect("shipped");
-        let body = ArticulatedBody::from_model(&model).expect("surfaces");
-        let cloud = scan_robot_of_about(
-            &body,
-            &truth,
-            &robot.home(),
-            &RobotScanOptions::default(),
-            20_000,
-        );
+        let RobotScene {
+            body,
+            world_from_root: truth,
+            cloud,
+        } = robot_scene(robot);
         let true_poses = body.link_poses(&truth, &robot.home());
         println!(
             "{}: {} cloud points, {starts} starts at delta 100 mm, {runs} fits each",

@@ -30,6 +30,24 @@ fn truth() -> Isometry3<f64> {
     )
 }
 
+/// A scan with 0.3 mm noise, 10% outliers, the floor and a neighbouring box, from three
+/// scanners.
+fn cluttered_scan(mesh: &Mesh, truth: &Isometry3<f64>) -> Vec<Point3<f64>> {
+    let scan = ScanOptions {
+        noise_sigma_m: 0.0003,
+        outlier_fraction: 0.1,
+        floor: true,
+        neighbour: true,
+        scanners: vec![
+            Point3::new(0.0, 0.0, 1.5),
+            Point3::new(1.5, -1.0, 1.0),
+            Point3::new(1.5, 1.0, 0.8),
+        ],
+        ..ScanOptions::default()
+    };
+    scan_part(mesh, truth, &scan)
+}
+
 fn errors(result: &Isometry3<f64>, truth: &Isometry3<f64>) -> (f64, f64) {
     (
         (result.translation.vector - truth.translation.vector).norm(),
@@ -93,19 +111,7 @@ fn pose_error_with_noise_is_of_the_order_the_noise_allows() {
 fn clutter_and_ten_percent_outliers_still_align_below_a_millimetre() {
     let mesh = step_block();
     let truth = truth();
-    let scan = ScanOptions {
-        noise_sigma_m: 0.0003,
-        outlier_fraction: 0.1,
-        floor: true,
-        neighbour: true,
-        scanners: vec![
-            Point3::new(0.0, 0.0, 1.5),
-            Point3::new(1.5, -1.0, 1.0),
-            Point3::new(1.5, 1.0, 0.8),
-        ],
-        ..ScanOptions::default()
-    };
-    let cloud = scan_part(&mesh, &truth, &scan);
+    let cloud = cluttered_scan(&mesh, &truth);
     let mut rng = TrialRng::new(13);
     // Ours; the thesis's SVD step is compared on the same kind of scene in docs/pca-trials.md.
     for step in [PcaStep::PointToPlane] {
@@ -135,19 +141,7 @@ fn clutter_and_ten_percent_outliers_still_align_below_a_millimetre() {
 fn spread_candidates_find_a_part_three_times_its_radius_from_the_start_among_clutter() {
     let mesh = step_block();
     let truth = truth();
-    let scan = ScanOptions {
-        noise_sigma_m: 0.0003,
-        outlier_fraction: 0.1,
-        floor: true,
-        neighbour: true,
-        scanners: vec![
-            Point3::new(0.0, 0.0, 1.5),
-            Point3::new(1.5, -1.0, 1.0),
-            Point3::new(1.5, 1.0, 0.8),
-        ],
-        ..ScanOptions::default()
-    };
-    let cloud = scan_part(&mesh, &truth, &scan);
+    let cloud = cluttered_scan(&mesh, &truth);
     let mut rng = TrialRng::new(21);
     let bound_m = 0.5;
     for _ in 0..3 {
