@@ -352,19 +352,16 @@ fn explore(
             );
         }
     }
+    // The runs share the threads; a run alone (a delta too small for any turn) takes them
+    // itself, since it is then all the exploration does.
+    let run_options = PcaOptions {
+        parallel: options.parallel && candidates.len() < rayon::current_num_threads(),
+        ..short.clone()
+    };
     let mut scored: Vec<(f64, Isometry3<f64>)> = candidates
         .par_iter()
         .map(|candidate| {
-            let run = run_schedule(
-                mesh,
-                &coarse,
-                candidate,
-                delta0_m,
-                &PcaOptions {
-                    parallel: false,
-                    ..short.clone()
-                },
-            );
+            let run = run_schedule(mesh, &coarse, candidate, delta0_m, &run_options);
             (consensus(mesh, &coarse, &run.pose, band), run.pose)
         })
         .collect();

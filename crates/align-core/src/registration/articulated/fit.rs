@@ -548,8 +548,10 @@ pub fn align_robot(
     if near.is_empty() {
         return Err(RobotFitError::NothingInReach { reach_m: reach });
     }
-    let keypoints = voxel_representatives(&near, options.voxel_m);
-    let coarse = voxel_representatives(&near, options.voxel_m * 3.0);
+    let (keypoints, coarse) = rayon::join(
+        || voxel_representatives(&near, options.voxel_m),
+        || voxel_representatives(&near, options.voxel_m * 3.0),
+    );
     let scan = Keypoints {
         coarse: &coarse,
         fine: &keypoints,
@@ -1318,14 +1320,23 @@ fn beam_search(
         hypotheses.iter().map(|h| (*h, q0.to_vec())).collect();
     let mut searched: Vec<usize> = Vec::new();
     for parameter in search_order(body) {
-        let mut next = Vec::new();
-        for (base, q) in &beam {
-            let peaks = width.min(PEAKS_PER_STATE);
-            let candidates = if global {
+        // The states are searched side by side (each search is parallel too, but its last
+        // few candidate values leave a core idle); merged in beam order, as if one by one.
+        let peaks = width.min(PEAKS_PER_STATE);
+        let search = |(base, q): &(Isometry3<f64>, Vec<f64>)| {
+            if global {
                 global_joint_candidates(body, scan, base, q, parameter, delta_m, options, peaks)
             } else {
                 joint_candidates(body, scan, base, q, parameter, delta_m, options, peaks)
-            };
+            }
+        };
+        let searched_states: Vec<Vec<Candidate>> = if options.parallel {
+            beam.par_iter().map(search).collect()
+        } else {
+            beam.iter().map(search).collect()
+        };
+        let mut next = Vec::new();
+        for ((base, q), candidates) in beam.iter().zip(searched_states) {
             for candidate in candidates {
                 let mut q = q.clone();
                 q[parameter] = candidate.value;
@@ -1355,29 +1366,31 @@ fn beam_search(
             ..options.clone()
         };
         let settle_band = 2.0 * band;
-        let mut scored: Vec<(i64, Isometry3<f64>, Vec<f64>)> = next
-            .into_iter()
-            .map(|(mut base, mut q)| {
-                if settle.max_iterations > 0 {
-                    refine_links(
-                        body,
-                        &sample,
-                        &mut base,
-                        &mut q,
-                        settle_band,
-                        &settle,
-                        &decided,
-                        SETTLE_DAMPING,
-                        false,
-                    );
-                }
-                (
-                    coverage(body, &sample, &base, &q, &decided, band, options.parallel),
-                    base,
-                    q,
-                )
-            })
-            .collect();
+        let settle_one = |(mut base, mut q): (Isometry3<f64>, Vec<f64>)| {
+            if settle.max_iterations > 0 {
+                refine_links(
+                    body,
+                    &sample,
+                    &mut base,
+                    &mut q,
+                    settle_band,
+                    &settle,
+                    &decided,
+                    SETTLE_DAMPING,
+                    false,
+                );
+            }
+            (
+                coverage(body, &sample, &base, &q, &decided, band, options.parallel),
+                base,
+                q,
+            )
+        };
+        let mut scored: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
+            next.into_par_iter().map(settle_one).collect()
+        } else {
+            next.into_iter().map(settle_one).collect()
+        };
         scored.sort_by_key(|s| std::cmp::Reverse(s.0));
         // Keep distinct states only: two hypotheses that reached the same configuration
         // would spend the beam twice.
@@ -1401,28 +1414,34 @@ fn beam_search(
         ..options.clone()
     };
     let band0 = options.refine_band0_m();
-    beam.into_iter()
-        .map(|(mut base, mut q)| {
-            refine(
-                body,
-                &sample,
-                &mut base,
-                &mut q,
-                band0,
-                &refine_options,
-                false,
-            );
-            let score = coverage(
-                body,
-                &sample,
-                &base,
-                &q,
-                &with_surface,
-                band,
-                options.parallel,
-            );
-            (score, base, q)
-        })
+    let rank = |(mut base, mut q): (Isometry3<f64>, Vec<f64>)| {
+        refine(
+            body,
+            &sample,
+            &mut base,
+            &mut q,
+            band0,
+            &refine_options,
+            false,
+        );
+        let score = coverage(
+            body,
+            &sample,
+            &base,
+            &q,
+            &with_surface,
+            band,
+            options.parallel,
+        );
+        (score, base, q)
+    };
+    let ranked: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
+        beam.into_par_iter().map(rank).collect()
+    } else {
+        beam.into_iter().map(rank).collect()
+    };
+    ranked
+        .into_iter()
         .max_by_key(|(score, _, _)| *score)
         .map(|(_, base, q)| (base, q))
         .expect("the beam is never empty")
