@@ -2209,6 +2209,9 @@ fn normal_equations(
         normal.syger(m.weight, &row, &row, 1.0);
         rhs.axpy(residual * m.weight, &row, 1.0);
     }
+    // The rank-one updates fill the lower triangle only; the refinement's measure of a step
+    // (step . normal step) needs the whole matrix.
+    normal.fill_upper_triangle_with_lower_triangle();
     (normal, rhs)
 }
 
@@ -2396,6 +2399,69 @@ mod tests {
             (fit.q[wrist_joint] - q_true[wrist_joint]).abs() < 0.01,
             "{:?}",
             fit.q
+        );
+    }
+
+    #[test]
+    fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
+        // step . (J^T W J) step is the weighted sum of (J step)^2 over the points: what the
+        // refinement compares with its tolerance. The rank-one updates fill one triangle; a
+        // product with that triangle alone miscounts every coupling (the base's yaw against
+        // the first joint's), and the refinement then ran to its limit on most starts.
+        let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+        let base = Isometry3::translation(0.2, -0.1, 0.0);
+        let q = ShippedRobot::Ur10.home();
+        let placed = Placed::new(&body, &base, &q);
+        let all: Vec<usize> = (0..body.links().len()).collect();
+        let mut rng = TrialRng::new(11);
+        let mut matches = Vec::new();
+        while matches.len() < 400 {
+            let link = (rng.uniform() * body.links().len() as f64) as usize;
+            let Some(surface) = &body.links()[link].surface else {
+                continue;
+            };
+            let around = surface.centroid().coords
+                + Vector3::new(
+                    rng.uniform() - 0.5,
+                    rng.uniform() - 0.5,
+                    rng.uniform() - 0.5,
+                ) * surface.radius_m()
+                    * 2.0;
+            let on = surface.closest_point(&Point3::from(around));
+            let point = placed.poses[link] * (on.point + on.normal * 0.002);
+            matches.extend(placed.nearest(&point, 0.01, &all));
+        }
+        let scale = placed_radius(&placed);
+        let (normal, _) = normal_equations(&body, &placed, &matches, scale);
+        let n = normal.nrows();
+        let step = DVector::from_fn(n, |i, _| ((i * 7 + 3) % 5) as f64 - 2.0);
+        // The step taken a millionth of the way, as the refinement applies it, and each
+        // matched surface point carried along with its link.
+        let epsilon = 1e-6;
+        let small = &step * epsilon;
+        let omega = Vector3::new(small[0], small[1], small[2]) / scale;
+        let rotation = UnitQuaternion::from_scaled_axis(omega);
+        let centre = base.translation.vector;
+        let shift = centre + Vector3::new(small[3], small[4], small[5]) - rotation * centre;
+        let moved_base = Isometry3::from_parts(Translation3::from(shift), rotation) * base;
+        let moved_q: Vec<f64> = q
+            .iter()
+            .enumerate()
+            .map(|(parameter, value)| value + small[6 + parameter] / scale)
+            .collect();
+        let moved = body.link_poses(&moved_base, &moved_q);
+        let direct: f64 = matches
+            .iter()
+            .map(|m| {
+                let carried = moved[m.link] * (placed.inverse[m.link] * m.surface);
+                let along_normal = m.normal.dot(&(carried - m.surface)) / epsilon;
+                m.weight * along_normal * along_normal
+            })
+            .sum();
+        let measured = step.dot(&(&normal * &step));
+        assert!(
+            (measured - direct).abs() <= 1e-4 * direct,
+            "{measured} vs {direct}"
         );
     }
 
