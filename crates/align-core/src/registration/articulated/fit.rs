@@ -101,8 +101,8 @@ impl Default for RobotFitOptions {
             beam_width: 6,
             base_candidates: 4,
             // The last refinement starts within the narrow band and takes a handful when the
-            // correspondences settle; when they cycle (sparse clouds, at the 0.1 mm level) it
-            // keeps the best of 25.
+            // correspondences settle; should they cycle (points switching between links at the
+            // 0.1 mm level), it keeps the best of 25.
             max_iterations: 25,
             // A tenth of a millimetre: a tenth of the success bar, below the scan's noise.
             tolerance_m: 1e-4,
