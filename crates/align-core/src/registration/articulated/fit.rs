@@ -1638,15 +1638,16 @@ fn joint_candidates(
             let mut trial = q.to_vec();
             trial[parameter] = value;
             match (&partner, coarse) {
-                (Some(partner), true) => partner
-                    .grid(body, q[partner.parameter], partner.half, 8)
-                    .into_iter()
-                    .map(|child| {
-                        trial[partner.parameter] = child;
-                        (count_points(&trial, band, &sample), Some(child))
-                    })
-                    .max_by_key(|(score, _)| *score)
-                    .unwrap_or((0, None)),
+                (Some(partner), true) => {
+                    distinct_values(partner.grid(body, q[partner.parameter], partner.half, 8))
+                        .into_iter()
+                        .map(|child| {
+                            trial[partner.parameter] = child;
+                            (count_points(&trial, band, &sample), Some(child))
+                        })
+                        .max_by_key(|(score, _)| *score)
+                        .unwrap_or((0, None))
+                }
                 _ => {
                     if let (Some(partner), Some(value)) = (&partner, partner_value) {
                         trial[partner.parameter] = value;
@@ -1656,11 +1657,13 @@ fn joint_candidates(
                 }
             }
         };
-        if options.parallel {
-            candidates.par_iter().map(|&v| score(v)).collect()
+        let distinct = distinct_values(candidates.to_vec());
+        let scores: Vec<(i64, Option<f64>)> = if options.parallel {
+            distinct.par_iter().map(|&v| score(v)).collect()
         } else {
-            candidates.iter().map(|&v| score(v)).collect()
-        }
+            distinct.iter().map(|&v| score(v)).collect()
+        };
+        spread_scores(candidates, &distinct, &scores)
     };
     // Ties (a symmetric link) go to the value nearest the current one: never invent motion.
     let better = |a: &(f64, i64), b: &(f64, i64)| {
@@ -1710,6 +1713,26 @@ fn joint_candidates(
     }
     candidates.sort_by(|a, b| better(&(b.value, b.score), &(a.value, a.score)));
     candidates
+}
+
+/// `grid` (ascending, from [`Window::grid`]) without the repeats a joint limit leaves where the
+/// window reaches past it: at 500 mm half the ABB IRB 1600's wrist grid was its limit.
+fn distinct_values(mut grid: Vec<f64>) -> Vec<f64> {
+    grid.dedup();
+    grid
+}
+
+/// The scores of `distinct` (= [`distinct_values`] of `grid`) laid out over `grid`.
+fn spread_scores<T: Copy>(grid: &[f64], distinct: &[f64], scores: &[T]) -> Vec<T> {
+    let mut index = 0;
+    grid.iter()
+        .map(|value| {
+            while distinct[index] != *value {
+                index += 1;
+            }
+            scores[index]
+        })
+        .collect()
 }
 
 /// The start is taken as not local when delta exceeds this fraction of the robot's radius at
@@ -2399,6 +2422,18 @@ mod tests {
             (fit.q[wrist_joint] - q_true[wrist_joint]).abs() < 0.01,
             "{:?}",
             fit.q
+        );
+    }
+
+    #[test]
+    fn a_grid_clamped_at_a_limit_is_scored_once_per_value_and_spread_back() {
+        let grid = vec![-2.0, -2.0, -2.0, -1.5, -1.0, 2.0, 2.0];
+        let distinct = distinct_values(grid.clone());
+        assert_eq!(distinct, vec![-2.0, -1.5, -1.0, 2.0]);
+        let scores: Vec<i64> = distinct.iter().map(|v| (v * 10.0) as i64).collect();
+        assert_eq!(
+            spread_scores(&grid, &distinct, &scores),
+            vec![-20, -20, -20, -15, -10, 20, 20]
         );
     }
 
