@@ -1012,7 +1012,7 @@ fn proximal_candidates(
     let root_bound_m = 2.0 * delta_m;
     // A start that is not local has nothing near it to slide into place from: the links are
     // detected anywhere the root may be.
-    let candidates = if global {
+    let candidates: Vec<Isometry3<f64>> = if global {
         ppf_poses(
             &mesh,
             cloud,
@@ -1032,25 +1032,20 @@ fn proximal_candidates(
         // boxy base was lost in 9 of 10 trials at 500 mm (docs/articulated-trials.md); the
         // spread alone lost 3 of 50 UR10 trials at 500 mm in an exploratory build (sparser
         // screening keypoints) that the exploration finds.
-        let mut candidates = pose_candidates_spread(
-            &mesh,
-            cloud,
-            world_from_root_start,
-            root_bound_m,
-            &options.proximal,
-            options.base_candidates,
-            DISTINCT_BASE_M,
-        );
-        candidates.extend(pose_candidates(
-            &mesh,
-            cloud,
-            world_from_root_start,
-            root_bound_m,
-            &options.proximal,
-            options.base_candidates,
-            DISTINCT_BASE_M,
-        ));
-        candidates
+        [pose_candidates_spread, pose_candidates]
+            .into_iter()
+            .flat_map(|candidates| {
+                candidates(
+                    &mesh,
+                    cloud,
+                    world_from_root_start,
+                    root_bound_m,
+                    &options.proximal,
+                    options.base_candidates,
+                    DISTINCT_BASE_M,
+                )
+            })
+            .collect()
     };
     match round_base {
         Some(axis) => candidates
