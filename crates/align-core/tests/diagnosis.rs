@@ -92,6 +92,7 @@ fn touches(cell: &Cell, true_radius: f64, true_scale: f64, rng: &mut TrialRng) -
                 id: (index + 1).to_string(),
                 q: solution.q,
                 qd: None,
+                base_from_flange: None,
             }
         })
         .collect()
@@ -133,7 +134,15 @@ fn a_larger_ball_on_twelve_mildly_tilted_touches_is_tied_not_misnamed() {
     // 0.3 mm more radius than declared: six times the noise.
     let samples = touches(&cell, 0.0033, 1.0, &mut rng);
     let start = aligned(&cell, &samples);
-    let diagnosis = diagnose(&cell.chain, &cell.tool, &cell.mesh, &samples, &start, SIGMA).unwrap();
+    let diagnosis = diagnose(
+        Some(&cell.chain),
+        &cell.tool,
+        &cell.mesh,
+        &samples,
+        &start,
+        SIGMA,
+    )
+    .unwrap();
     let report = format!("{}: {:?}", diagnosis.explanation, diagnosis.alternatives);
     assert_eq!(diagnosis.verdict, Verdict::Ambiguous, "{report}");
     let tied = diagnosis.explanation.split(" explain").next().unwrap();
@@ -144,7 +153,7 @@ fn a_larger_ball_on_twelve_mildly_tilted_touches_is_tied_not_misnamed() {
             diagnosis
                 .alternatives
                 .iter()
-                .filter_map(|a| a.fit.clone().map(|fit| (a.name, fit))),
+                .filter_map(|a| a.fit.clone().map(|fit| (a.name.clone(), fit))),
         )
         .find(|(name, _)| *name == "probe_radius")
         .unwrap()
@@ -164,7 +173,15 @@ fn a_part_larger_than_its_cad_model_is_found() {
     // 0.5% larger: up to 1.5 mm at the far end of the 300 mm block.
     let samples = touches(&cell, 0.003, 1.005, &mut rng);
     let start = aligned(&cell, &samples);
-    let diagnosis = diagnose(&cell.chain, &cell.tool, &cell.mesh, &samples, &start, SIGMA).unwrap();
+    let diagnosis = diagnose(
+        Some(&cell.chain),
+        &cell.tool,
+        &cell.mesh,
+        &samples,
+        &start,
+        SIGMA,
+    )
+    .unwrap();
     assert_eq!(
         diagnosis.verdict,
         Verdict::Effect,
@@ -190,8 +207,15 @@ fn noise_alone_gives_no_effect_in_at_least_95_percent_of_seeds() {
         let mut rng = TrialRng::new(100 + seed);
         let samples = touches(&cell, 0.003, 1.0, &mut rng);
         let start = aligned(&cell, &samples);
-        let diagnosis =
-            diagnose(&cell.chain, &cell.tool, &cell.mesh, &samples, &start, SIGMA).unwrap();
+        let diagnosis = diagnose(
+            Some(&cell.chain),
+            &cell.tool,
+            &cell.mesh,
+            &samples,
+            &start,
+            SIGMA,
+        )
+        .unwrap();
         no_effect += usize::from(diagnosis.verdict == Verdict::NoEffect);
     }
     println!("no_effect in {no_effect}/{seeds} noise-only sessions");
@@ -207,7 +231,7 @@ fn too_few_touches_and_bad_sigma_are_refused() {
     let mut rng = TrialRng::new(1);
     let samples = touches(&cell, 0.003, 1.0, &mut rng);
     let message = diagnose(
-        &cell.chain,
+        Some(&cell.chain),
         &cell.tool,
         &cell.mesh,
         &samples[..6],
@@ -220,7 +244,7 @@ fn too_few_touches_and_bad_sigma_are_refused() {
         "diagnosis needs at least 7 touches (6 fix the pose), got 6"
     );
     let message = diagnose(
-        &cell.chain,
+        Some(&cell.chain),
         &cell.tool,
         &cell.mesh,
         &samples,

@@ -252,12 +252,12 @@ pub fn run(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutput
     };
     let template = SessionFile {
         format: FORMAT.to_owned(),
-        robot: RobotSection {
+        robot: Some(RobotSection {
             urdf: "robot.urdf".to_owned(),
             base_link: robot.base_link().to_owned(),
             tip_link: robot.flange_link().to_owned(),
             package_dirs: Default::default(),
-        },
+        }),
         tool: ToolSection {
             tcp: pose(&tcp),
             tip_radius,

@@ -136,18 +136,23 @@ pub fn diagnose_session(session: &LoadedSession) -> Result<SessionDiagnosis, Bad
         &options,
     )
     .map_err(|error| BadInput(format!("cannot align: {error}")))?;
-    let samples: Vec<TouchSample> = session
+    let samples = session
         .file
         .inspections
         .iter()
-        .map(|i| TouchSample {
-            id: i.id.clone(),
-            q: i.q.clone(),
-            qd: i.qd.clone(),
+        .map(|i| match &i.q {
+            Some(q) => Ok(TouchSample::from_joints(
+                i.id.clone(),
+                q.clone(),
+                i.qd.clone(),
+            )),
+            None => i
+                .base_from_flange(None)
+                .map(|pose| TouchSample::from_flange_pose(i.id.clone(), pose)),
         })
-        .collect();
+        .collect::<Result<Vec<TouchSample>, BadInput>>()?;
     let diagnosis = diagnose(
-        &session.chain,
+        session.chain.as_ref(),
         &session.tool,
         &session.mesh,
         &samples,

@@ -172,6 +172,13 @@ pub fn start(config: &ServeConfig) -> Result<ServeHandle, String> {
     let folder = config.session.parent().unwrap_or(Path::new(".")).to_owned();
     // Check robot, tool and part now rather than at the first align.
     let loaded = LoadedSession::resolve(template.clone(), &folder).map_err(|e| e.0)?;
+    // The service turns the robot's joint states into touches: it needs the robot.
+    let Some(chain) = loaded.chain.clone() else {
+        return Err(format!(
+            "session '{}' has no robot: the service needs one to turn joint states into touches",
+            config.session.display()
+        ));
+    };
     let mut inspections = Vec::new();
     let journal_exists = config.journal.exists();
     let mut highest = replay(&config.journal, &mut inspections)?;
@@ -239,7 +246,6 @@ pub fn start(config: &ServeConfig) -> Result<ServeHandle, String> {
             config.clone(),
         );
         let tool = loaded.tool.clone();
-        let chain = loaded.chain.clone();
         threads.push(thread::spawn(move || {
             let context = context;
             let mut service = Service {
@@ -457,10 +463,12 @@ impl Service {
                         .display()
                         .to_string()
                 };
-                file.robot.urdf = absolute(&file.robot.urdf);
                 file.part.mesh = absolute(&file.part.mesh);
-                for dir in file.robot.package_dirs.values_mut() {
-                    *dir = absolute(dir);
+                if let Some(robot) = &mut file.robot {
+                    robot.urdf = absolute(&robot.urdf);
+                    for dir in robot.package_dirs.values_mut() {
+                        *dir = absolute(dir);
+                    }
                 }
                 let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
                 std::fs::write(&path, text + "\n")
@@ -561,7 +569,8 @@ impl Service {
         }
         let inspection = Inspection {
             id: self.state.next_id.to_string(),
-            q: latest.q,
+            q: Some(latest.q),
+            flange_pose: None,
             qd: Some(latest.qd),
             stamp: Some(latest.controller_time),
             face: None,

@@ -21,7 +21,9 @@ pub const FORMAT: &str = "cobot-align/session@1";
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SessionFile {
     pub format: String,
-    pub robot: RobotSection,
+    /// Optional when every inspection gives its `flange_pose` (DESIGN.md 6.3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<RobotSection>,
     pub tool: ToolSection,
     pub part: PartSection,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -80,7 +82,13 @@ pub struct FaceSection {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Inspection {
     pub id: String,
-    pub q: Vec<f64>,
+    /// Joint positions, rad (or m for prismatic joints).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub q: Option<Vec<f64>>,
+    /// `base_from_flange` as the controller reports it instead of joints: x, y, z (m) and a
+    /// rotation vector (rad), as a UR's `actual_TCP_pose` with a zero TCP offset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flange_pose: Option<[f64; 6]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub qd: Option<Vec<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -94,7 +102,8 @@ pub struct Inspection {
 #[derive(Debug)]
 pub struct LoadedSession {
     pub file: SessionFile,
-    pub chain: Chain,
+    /// `None` when the session has no robot (every inspection gives its flange pose).
+    pub chain: Option<Chain>,
     pub tool: Tool,
     pub mesh: Mesh,
     pub faces: Vec<Face>,
@@ -135,15 +144,22 @@ impl LoadedSession {
 
     pub fn resolve(file: SessionFile, folder: &Path) -> Result<Self, BadInput> {
         let relative = |p: &str| -> PathBuf { folder.join(p) };
-        let mut packages = PackageMap::new();
-        for (name, dir) in &file.robot.package_dirs {
-            packages.insert(name.clone(), relative(dir));
-        }
-        let model = RobotModel::from_urdf_file(&relative(&file.robot.urdf), &packages)
-            .map_err(BadInput::new)?;
-        let chain = model
-            .chain(&file.robot.base_link, &file.robot.tip_link)
-            .map_err(BadInput::new)?;
+        let chain = match &file.robot {
+            Some(robot) => {
+                let mut packages = PackageMap::new();
+                for (name, dir) in &robot.package_dirs {
+                    packages.insert(name.clone(), relative(dir));
+                }
+                let model = RobotModel::from_urdf_file(&relative(&robot.urdf), &packages)
+                    .map_err(BadInput::new)?;
+                Some(
+                    model
+                        .chain(&robot.base_link, &robot.tip_link)
+                        .map_err(BadInput::new)?,
+                )
+            }
+            None => None,
+        };
         let tool = Tool::new(
             pose(&file.tool.tcp, "tool.tcp")?,
             file.tool.tip_radius,
@@ -174,9 +190,7 @@ impl LoadedSession {
         }
         let mut touches = Vec::with_capacity(file.inspections.len());
         for inspection in &file.inspections {
-            let base_from_flange = chain
-                .forward(&inspection.q)
-                .map_err(|error| BadInput(format!("inspection '{}': {error}", inspection.id)))?;
+            let base_from_flange = inspection.base_from_flange(chain.as_ref())?;
             let base_from_tcp = tool.base_from_tcp(&base_from_flange);
             touches.push(Touch {
                 id: inspection.id.clone(),
@@ -197,4 +211,52 @@ impl LoadedSession {
             touches,
         })
     }
+}
+
+impl Inspection {
+    /// The flange pose this inspection stands for: forward kinematics of its joints, or the
+    /// `flange_pose` it gives. Exactly one of the two must be present.
+    pub fn base_from_flange(&self, chain: Option<&Chain>) -> Result<Isometry3<f64>, BadInput> {
+        let id = &self.id;
+        match (&self.q, &self.flange_pose) {
+            (Some(_), Some(_)) => Err(BadInput(format!(
+                "inspection '{id}' gives both q and flange_pose: give one"
+            ))),
+            (None, None) => Err(BadInput(format!(
+                "inspection '{id}' gives neither q (joints) nor flange_pose"
+            ))),
+            (None, Some(pose)) => flange_pose(pose)
+                .map_err(|reason| BadInput(format!("inspection '{id}': flange_pose {reason}"))),
+            (Some(q), None) => {
+                let chain = chain.ok_or_else(|| {
+                    BadInput(format!(
+                        "inspection '{id}' gives joints (q) but the session has no robot to turn them into a flange pose"
+                    ))
+                })?;
+                chain
+                    .forward(q)
+                    .map_err(|error| BadInput(format!("inspection '{id}': {error}")))
+            }
+        }
+    }
+}
+
+/// `[x, y, z, rx, ry, rz]` (m, rotation vector in rad) as an isometry. A rotation vector longer
+/// than pi is refused rather than wrapped: controllers report angles in [0, pi], so a longer one
+/// is a unit mistake (degrees) or a corrupt value.
+pub fn flange_pose(pose: &[f64; 6]) -> Result<Isometry3<f64>, String> {
+    if let Some(index) = pose.iter().position(|v| !v.is_finite()) {
+        return Err(format!("has a non-finite value at position {index}"));
+    }
+    let rotation = Vector3::new(pose[3], pose[4], pose[5]);
+    let angle = rotation.norm();
+    if angle > std::f64::consts::PI + 1e-9 {
+        return Err(format!(
+            "has a rotation vector of {angle:.4} rad, over pi: is it in degrees?"
+        ));
+    }
+    Ok(Isometry3::new(
+        Vector3::new(pose[0], pose[1], pose[2]),
+        rotation,
+    ))
 }

@@ -316,6 +316,60 @@ impl Mesh {
     }
 }
 
+/// A ball centre's closest surface point with its signed distance and the distance's gradient.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SignedClosest {
+    pub point: Point3<f64>,
+    /// Unit gradient of the signed distance at the query: exact at edges and corners too, where
+    /// the pseudo-normal only says which side is outside.
+    pub gradient: Vector3<f64>,
+    /// Negative on the inside (or, on an open mesh, on the side away from the probe).
+    pub signed_distance_m: f64,
+    /// The closest triangle's own unit normal.
+    pub face_normal: Vector3<f64>,
+}
+
+impl Mesh {
+    /// The closest point to `query` with a signed distance on every mesh. A closed mesh has an
+    /// inside. On an open one the side is the face normal's, or, when `facing` (the reversed
+    /// direction the probe travelled, unit, mesh frame) is given, the side the probe came from:
+    /// a scanned or exported surface may have its triangles wound either way.
+    pub fn signed_closest(
+        &self,
+        query: &Point3<f64>,
+        facing: Option<&Vector3<f64>>,
+    ) -> SignedClosest {
+        let found = self.closest_point(query);
+        let face_normal = self.triangle_normal(found.triangle);
+        let offset = query - found.point;
+        let distance = offset.norm();
+        let signed_distance_m = if self.is_watertight() {
+            found.signed_distance
+        } else {
+            let outward = match facing {
+                Some(f) if face_normal.dot(f) < 0.0 => -face_normal,
+                _ => face_normal,
+            };
+            if offset.dot(&outward) < 0.0 {
+                -distance
+            } else {
+                distance
+            }
+        };
+        let gradient = if distance > 1e-12 {
+            offset / distance * signed_distance_m.signum()
+        } else {
+            found.normal
+        };
+        SignedClosest {
+            point: found.point,
+            gradient,
+            signed_distance_m,
+            face_normal,
+        }
+    }
+}
+
 /// Six times the signed volume enclosed by the triangles (positive for outward winding).
 fn signed_volume(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> f64 {
     triangles

@@ -6,4 +6,4 @@ mod mesh;
 pub mod shapes;
 
 pub use distance_grid::DistanceGrid;
-pub use mesh::{Mesh, MeshError, SurfacePoint};
+pub use mesh::{Mesh, MeshError, SignedClosest, SurfacePoint};

@@ -1,0 +1,202 @@
+//! The global search: local alignments from orientations spread over the rotation group, the
+//! promising ones polished, and the results ranked by likelihood with coherence as a prior.
+//!
+//! Ranking: with the touch noise sigma (declared, or estimated from the best fit), a pose scores
+//! RSS / sigma^2 (its -2 log-likelihood) plus a penalty for every touch whose closest face turns
+//! away from the probe. Poses within [`PsaOptions::ambiguity_chi2`] of the best score are
+//! equally supported by the touches: the result is ambiguous only then, never because a start
+//! failed to converge.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use super::local::{LocalSolution, Workspace};
+use super::target::PsaTarget;
+use super::{Candidate, PsaOptions, Touch};
+use crate::registration::RegistrationError;
+use crate::registration::convergence::pose_distance;
+
+/// Explored starts polished in full at least (when that many distinct ones exist).
+const MIN_CONTENDERS: usize = 8;
+/// Explored starts polished in full at most: enough for every face pairing of a cube.
+const MAX_CONTENDERS: usize = 64;
+
+/// Short local runs from `count` orientations spread over SO(3), each translated so that the
+/// mesh's centroid sits on the touches' centroid: where each start leads.
+pub(super) fn explore(
+    target: &PsaTarget<'_>,
+    touches: &[Touch],
+    options: &PsaOptions,
+    count: usize,
+    best_rms_m: f64,
+) -> Result<Vec<LocalSolution>, RegistrationError> {
+    let centroid = touches
+        .iter()
+        .fold(Vector3::zeros(), |sum, touch| sum + touch.point.coords)
+        / touches.len() as f64;
+    let part_centroid = target.mesh().centroid().coords;
+    // A short stopping window and a coarse tolerance find where each start leads; only the
+    // poses that compete for best are then refined to full precision.
+    let explore = PsaOptions {
+        window: 3,
+        tolerance_m: 1e-6,
+        max_iterations: 30,
+        slide_first: 4,
+        ..options.clone()
+    };
+    let mut explorer = Workspace::new(target, touches, &explore)?;
+    explorer.polish = false;
+    let mut best_rms = best_rms_m;
+    let radius_m = target.mesh().radius_m();
+    let mut solutions = Vec::with_capacity(count);
+    for rotation in spread_rotations(count) {
+        let translation = centroid - rotation * part_centroid;
+        let start = Isometry3::from_parts(Translation3::from(translation), rotation);
+        // A start still far worse than the best after its first full steps is heading for
+        // another minimum: abandon it (ties that matter are found by the starts that get there
+        // directly).
+        explorer.abandon_above = Some((20.0 * best_rms).max(0.02 * radius_m));
+        let solution = explorer.run_local(&start);
+        best_rms = best_rms.min(solution.rms_m);
+        solutions.push(solution);
+    }
+    Ok(solutions)
+}
+
+/// The explored solutions worth polishing: the distinct ones near the best RMS (every pose of a
+/// symmetric set), and at least the [`MIN_CONTENDERS`] best distinct ones, since an explored RMS
+/// is only a guide to the polished one.
+pub(super) fn contenders(
+    mut explored: Vec<LocalSolution>,
+    radius_m: f64,
+    options: &PsaOptions,
+) -> Vec<LocalSolution> {
+    explored.sort_by(|a, b| a.rms_m.total_cmp(&b.rms_m));
+    let Some(best) = explored.first().map(|s| s.rms_m) else {
+        return explored;
+    };
+    let band = 2.0 * best + 2.0 * options.ambiguity_tolerance_m;
+    let mut distinct: Vec<LocalSolution> = Vec::new();
+    for solution in explored {
+        if distinct.len() >= MAX_CONTENDERS
+            || (distinct.len() >= MIN_CONTENDERS && solution.rms_m > band)
+        {
+            break;
+        }
+        let seen = distinct.iter().any(|other| {
+            pose_distance(&other.pose, &solution.pose, radius_m) < options.distinct_pose_m
+        });
+        if !seen {
+            distinct.push(solution);
+        }
+    }
+    distinct
+}
+
+/// Polishes the contenders in full.
+pub(super) fn polish(
+    workspace: &mut Workspace<'_>,
+    contenders: Vec<LocalSolution>,
+) -> Vec<LocalSolution> {
+    contenders
+        .into_iter()
+        .map(|solution| {
+            let mut polished = workspace.run_local(&solution.pose);
+            polished.iterations += solution.iterations;
+            polished
+        })
+        .collect()
+}
+
+/// The noise the ranking measures fits against: declared, or estimated from the best fit's
+/// residual (N - 6 degrees of freedom), never below `ambiguity_tolerance_m` (noiseless data).
+pub(super) fn ranking_sigma(options: &PsaOptions, best_rms_m: f64, touches: usize) -> f64 {
+    let estimated = if touches > 6 {
+        best_rms_m * (touches as f64 / (touches - 6) as f64).sqrt()
+    } else {
+        best_rms_m
+    };
+    options
+        .noise_sigma_m
+        .unwrap_or(estimated)
+        .max(options.ambiguity_tolerance_m)
+}
+
+/// -2 log-posterior up to a constant: RSS / sigma^2 plus the coherence prior.
+fn score(solution: &LocalSolution, sigma_m: f64, touches: usize, options: &PsaOptions) -> f64 {
+    let rss = solution.rms_m * solution.rms_m * touches as f64;
+    let prior = if options.coherence {
+        options.incoherence_penalty_chi2 * solution.incoherent as f64
+    } else {
+        0.0
+    };
+    rss / (sigma_m * sigma_m) + prior
+}
+
+/// Picks the best-scoring solution; other distinct solutions within the ambiguity margin make it
+/// ambiguous. Among equally good poses the one nearest the start (the user's nominal pose) is
+/// reported.
+pub(super) fn choose(
+    solutions: Vec<LocalSolution>,
+    start: &Isometry3<f64>,
+    radius_m: f64,
+    touches: usize,
+    options: &PsaOptions,
+) -> (LocalSolution, Vec<Candidate>) {
+    let best_rms = solutions
+        .iter()
+        .map(|s| s.rms_m)
+        .fold(f64::INFINITY, f64::min);
+    let sigma = ranking_sigma(options, best_rms, touches);
+    let mut scored: Vec<(f64, LocalSolution)> = solutions
+        .into_iter()
+        .map(|s| (score(&s, sigma, touches, options), s))
+        .collect();
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let best_score = scored[0].0;
+    let mut distinct: Vec<LocalSolution> = Vec::new();
+    for (score, solution) in scored {
+        if score > best_score + options.ambiguity_chi2 {
+            break;
+        }
+        let seen = distinct.iter().any(|other| {
+            pose_distance(&other.pose, &solution.pose, radius_m) < options.distinct_pose_m
+        });
+        if !seen {
+            distinct.push(solution);
+        }
+    }
+    distinct.sort_by(|a, b| {
+        pose_distance(&a.pose, start, radius_m).total_cmp(&pose_distance(&b.pose, start, radius_m))
+    });
+    let best = distinct.remove(0);
+    let others = distinct
+        .into_iter()
+        .map(|solution| Candidate {
+            base_from_part: solution.pose,
+            rms_m: solution.rms_m,
+        })
+        .collect();
+    (best, others)
+}
+
+/// `count` rotations spread evenly over SO(3) (Alexa's super-Fibonacci spirals, CVPR 2022):
+/// deterministic, no clustering at the poles as with Euler-angle grids.
+pub fn spread_rotations(count: usize) -> Vec<UnitQuaternion<f64>> {
+    let phi = std::f64::consts::SQRT_2;
+    let psi = 1.533_751_168_755_204_3;
+    (0..count)
+        .map(|i| {
+            let s = i as f64 + 0.5;
+            let r = (s / count as f64).sqrt();
+            let big_r = (1.0 - s / count as f64).sqrt();
+            let alpha = 2.0 * std::f64::consts::PI * s / phi;
+            let beta = 2.0 * std::f64::consts::PI * s / psi;
+            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                r * alpha.sin(),
+                r * alpha.cos(),
+                big_r * beta.sin(),
+                big_r * beta.cos(),
+            ))
+        })
+        .collect()
+}

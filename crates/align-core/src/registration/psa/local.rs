@@ -1,0 +1,387 @@
+//! One local alignment: closest-point correspondences and a rigid step, repeated until the pose
+//! stops moving.
+//!
+//! With coherence on and approach directions known, a run has two phases. The guided phase
+//! matches each touch to the nearest surface facing its probe, which widens the basin: a touch
+//! pushed through a wall by a wrong start still finds the face it touched. The polish phase then
+//! matches each touch to its plain closest point and descends monotonically to the least-squares
+//! optimum of the signed distances, the pose the touches actually support. Coherence never
+//! decides the final fit; it only steers the search and ranks its results.
+
+use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
+
+use super::target::{Contact, PsaTarget};
+use super::{PsaMethod, PsaOptions, Touch, TouchResidual};
+use crate::geometry::Mesh;
+use crate::registration::convergence::{StopCriterion, pose_distance};
+use crate::registration::{RegistrationError, weighted_svd};
+
+/// How touches are matched to the surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Matching {
+    /// The nearest surface facing the probe within the cone (rad), where the approach is known.
+    Guided(f64),
+    /// The plain closest point: what the least-squares optimum is defined by.
+    Plain,
+}
+
+#[derive(Debug, Clone)]
+pub(super) struct LocalSolution {
+    pub pose: Isometry3<f64>,
+    pub iterations: usize,
+    pub converged: bool,
+    /// RMS distance of the touches from the ball-offset surface at the last matching, m.
+    pub rms_m: f64,
+    /// Touches whose plain closest face turns away from the probe (polished solutions only).
+    pub incoherent: usize,
+}
+
+/// The cone of the first guided stage: touches matched to faces they meet head-on.
+const HEAD_ON_CONE_RAD: f64 = std::f64::consts::FRAC_PI_4;
+
+/// Buffers reused across iterations and starts, so the hot loop does not allocate.
+pub(super) struct Workspace<'t> {
+    target: &'t PsaTarget<'t>,
+    touches: &'t [Touch],
+    surfaces: Vec<&'t Mesh>,
+    pub(super) options: &'t PsaOptions,
+    pub(super) radius_m: f64,
+    moved: Vec<Point3<f64>>,
+    normals: Vec<Vector3<f64>>,
+    weights: Vec<f64>,
+    fixed: Vec<Point3<f64>>,
+    /// Touches whose contact at the last matching was incoherent.
+    incoherent: usize,
+    /// Abandon a local run whose RMS is still above this after its first full steps.
+    pub(super) abandon_above: Option<f64>,
+    /// Whether runs end with the plain least-squares polish (off for the global search's
+    /// exploration, which only finds where each start leads).
+    pub(super) polish: bool,
+}
+
+impl<'t> Workspace<'t> {
+    pub(super) fn new(
+        target: &'t PsaTarget<'t>,
+        touches: &'t [Touch],
+        options: &'t PsaOptions,
+    ) -> Result<Self, RegistrationError> {
+        let surfaces = touches
+            .iter()
+            .map(|touch| target.surface_for(touch))
+            .collect::<Result<Vec<_>, _>>()?;
+        let count = touches.len();
+        Ok(Self {
+            target,
+            touches,
+            surfaces,
+            options,
+            radius_m: target.mesh().radius_m(),
+            moved: Vec::with_capacity(count),
+            normals: Vec::with_capacity(count),
+            weights: Vec::with_capacity(count),
+            fixed: touches.iter().map(|touch| touch.point).collect(),
+            incoherent: 0,
+            abandon_above: None,
+            polish: true,
+        })
+    }
+
+    fn guided_available(&self) -> bool {
+        self.options.coherence
+            && self
+                .touches
+                .iter()
+                .any(|touch| touch.approach.is_some() && touch.face.is_none())
+    }
+
+    /// The contact of touch `index` at the pose whose inverse is `part_from_base`.
+    fn contact(
+        &self,
+        index: usize,
+        part_from_base: &Isometry3<f64>,
+        matching: Matching,
+    ) -> Contact {
+        let touch = &self.touches[index];
+        let in_part = part_from_base * touch.point;
+        let facing = touch
+            .approach
+            .and_then(|approach| (part_from_base.rotation * -approach).try_normalize(1e-12));
+        let cone = self.options.coherence_cone_rad;
+        if let Matching::Guided(guide_cone) = matching
+            && self.options.coherence
+            && touch.face.is_none()
+            && let Some(facing) = &facing
+        {
+            if let Some(found) = self.target.guided_contact(&in_part, facing, guide_cone) {
+                return found;
+            }
+            // No surface faces this probe at this pose: the plain contact, marked incoherent.
+        }
+        self.target
+            .plain_contact(self.surfaces[index], &in_part, facing.as_ref(), cone)
+    }
+
+    /// The surface point each touch corresponds to at `pose`, offset by the ball radius along
+    /// its normal, and that normal, both in the base frame.
+    pub(super) fn correspond(&mut self, pose: &Isometry3<f64>, matching: Matching) {
+        self.moved.clear();
+        self.normals.clear();
+        self.weights.clear();
+        self.incoherent = 0;
+        let part_from_base = pose.inverse();
+        let radius = self.options.tip_radius_m;
+        for index in 0..self.touches.len() {
+            let contact = self.contact(index, &part_from_base, matching);
+            self.incoherent += usize::from(!contact.coherent);
+            let centre_in_part = match matching {
+                Matching::Guided(_) => contact.point + contact.normal * radius,
+                // Where the ball centre would sit at its radius along the distance gradient:
+                // the point-to-plane residual is then exactly the signed distance minus the
+                // radius, at edges and corners too.
+                Matching::Plain => {
+                    let in_part = part_from_base * self.touches[index].point;
+                    in_part - contact.normal * (contact.signed_distance_m - radius)
+                }
+            };
+            self.moved.push(pose * centre_in_part);
+            self.normals.push(pose.rotation * contact.normal);
+            self.weights.push(1.0);
+        }
+    }
+
+    /// RMS distance of the touches from the (ball-offset) surface at the current correspondences.
+    fn rms(&self) -> f64 {
+        let sum: f64 = self
+            .moved
+            .iter()
+            .zip(&self.fixed)
+            .map(|(moved, fixed)| (fixed - moved).norm_squared())
+            .sum();
+        (sum / self.moved.len() as f64).sqrt()
+    }
+
+    /// One local alignment from `start`. Where coherence applies, the touches are first matched
+    /// to surface facing them head-on (within [`HEAD_ON_CONE_RAD`]), which is where a start far
+    /// off is most likely to find each touch's face, then to any surface their ball could have
+    /// touched (the coherence cone), and finally polished on their plain closest points
+    /// (point-to-plane only; the thesis's point-to-point step runs as it did).
+    pub(super) fn run_local(&mut self, start: &Isometry3<f64>) -> LocalSolution {
+        let point_to_plane = self.options.method == PsaMethod::PointToPlane;
+        let guided = self.guided_available();
+        let mut stages = Vec::with_capacity(3);
+        if guided {
+            stages.push(Matching::Guided(
+                HEAD_ON_CONE_RAD.min(self.options.coherence_cone_rad),
+            ));
+            if point_to_plane && self.options.coherence_cone_rad > HEAD_ON_CONE_RAD {
+                stages.push(Matching::Guided(self.options.coherence_cone_rad));
+            }
+        }
+        if self.polish && (point_to_plane || !guided) {
+            stages.push(Matching::Plain);
+        }
+        let mut solution: Option<LocalSolution> = None;
+        let abandon = self.abandon_above;
+        for (index, matching) in stages.into_iter().enumerate() {
+            let from = solution.as_ref().map_or(*start, |s| s.pose);
+            let slide = if index == 0 {
+                self.options.slide_first
+            } else {
+                0
+            };
+            // Only the first stage may abandon: the later ones start where it settled.
+            self.abandon_above = if index == 0 { abandon } else { None };
+            let mut next = self.iterate(&from, matching, slide);
+            next.iterations += solution.map_or(0, |s| s.iterations);
+            solution = Some(next);
+        }
+        self.abandon_above = abandon;
+        let mut solution = solution.unwrap_or_else(|| self.iterate(start, Matching::Plain, 0));
+        solution.incoherent = if self.polish {
+            self.correspond(&solution.pose, Matching::Plain);
+            self.incoherent
+        } else {
+            0
+        };
+        solution
+    }
+
+    /// Iterates correspondences and steps. A step that increases the RMS distance (a
+    /// linearisation that overshot, typically when a correspondence jumps to another face) is
+    /// halved until it does not; when no fraction descends, the pose is a minimum at the
+    /// resolution of the surface and the run has converged. The thesis's point-to-point step
+    /// keeps its original rule (accept after six halvings), so its trial tables are unchanged.
+    fn iterate(
+        &mut self,
+        start: &Isometry3<f64>,
+        matching: Matching,
+        translation_only: usize,
+    ) -> LocalSolution {
+        let mut pose = *start;
+        let mut stop =
+            StopCriterion::new(self.options.window, self.options.tolerance_m, self.radius_m);
+        let mut converged = false;
+        let mut iterations = 0;
+        stop.update(&pose);
+        self.correspond(&pose, matching);
+        let mut rms = self.rms();
+        let point_to_point = self.options.method == PsaMethod::PointToPoint;
+        'outer: while iterations < self.options.max_iterations {
+            iterations += 1;
+            let sliding = iterations <= translation_only;
+            let step = match self.options.method {
+                PsaMethod::PointToPoint => weighted_svd(&self.moved, &self.fixed, &self.weights)
+                    .ok()
+                    .map(Twist::from_isometry),
+                PsaMethod::PointToPlane => self.point_to_plane_step(sliding),
+            };
+            let Some(step) = step else {
+                break;
+            };
+            let mut fraction = 1.0;
+            let candidate = loop {
+                let candidate = step.scaled(fraction) * pose;
+                self.correspond(&candidate, matching);
+                let candidate_rms = self.rms();
+                // While sliding, the orientation may still be wrong and the RMS need not fall.
+                if sliding
+                    || candidate_rms <= rms * (1.0 + 1e-12)
+                    || (point_to_point && fraction < 1.0 / 64.0)
+                {
+                    rms = candidate_rms;
+                    break candidate;
+                }
+                if fraction < 1.0 / 1024.0 {
+                    // No descent along the step: the pose is stationary.
+                    self.correspond(&pose, matching);
+                    converged = true;
+                    break 'outer;
+                }
+                fraction *= 0.5;
+            };
+            let moved_m = pose_distance(&pose, &candidate, self.radius_m);
+            pose = candidate;
+            if !sliding && stop.update(&pose) {
+                converged = true;
+                break;
+            }
+            if !sliding && moved_m < self.options.tolerance_m * 1e-3 {
+                // Settled to far below the tolerance: every remaining iteration of the window
+                // would find the same correspondences and stay within it.
+                converged = true;
+                break;
+            }
+            if let Some(limit) = self.abandon_above
+                && iterations >= translation_only + 6
+                && rms > limit
+            {
+                break;
+            }
+        }
+        LocalSolution {
+            pose,
+            iterations,
+            converged,
+            rms_m: rms,
+            incoherent: self.incoherent,
+        }
+    }
+
+    /// Normal equations of the linearised point-to-plane problem about the weighted centroid `c`:
+    /// unknowns x = (omega, t), moved point y' = y + omega x (y - c) + t, residual
+    /// n . (y' - i) = 0. Rotation columns are scaled by the part radius so the system is
+    /// well-conditioned whatever the units.
+    pub(super) fn normal_equations(&self) -> (Matrix6<f64>, Vector6<f64>, Point3<f64>) {
+        let total: f64 = self.weights.iter().sum();
+        let centre = Point3::from(
+            self.moved
+                .iter()
+                .zip(&self.weights)
+                .fold(Vector3::zeros(), |sum, (p, w)| sum + p.coords * *w)
+                / total,
+        );
+        let scale = self.radius_m.max(1e-9);
+        let mut normal_matrix = Matrix6::zeros();
+        let mut rhs = Vector6::zeros();
+        for (((moved, fixed), normal), weight) in self
+            .moved
+            .iter()
+            .zip(&self.fixed)
+            .zip(&self.normals)
+            .zip(&self.weights)
+        {
+            let lever = (moved - centre).cross(normal) / scale;
+            let row = Vector6::new(lever.x, lever.y, lever.z, normal.x, normal.y, normal.z);
+            let residual = normal.dot(&(fixed - moved));
+            normal_matrix += row * row.transpose() * *weight;
+            rhs += row * (residual * weight);
+        }
+        (normal_matrix, rhs, centre)
+    }
+
+    fn point_to_plane_step(&self, translation_only: bool) -> Option<Twist> {
+        let (normal_matrix, rhs, centre) = self.normal_equations();
+        if translation_only {
+            let block = normal_matrix.fixed_view::<3, 3>(3, 3).into_owned();
+            let translation = block
+                .cholesky()?
+                .solve(&rhs.fixed_rows::<3>(3).into_owned());
+            return Some(Twist {
+                omega: Vector3::zeros(),
+                translation,
+                centre,
+            });
+        }
+        let solution = normal_matrix.cholesky()?.solve(&rhs);
+        let scale = self.radius_m.max(1e-9);
+        Some(Twist {
+            omega: Vector3::new(solution[0], solution[1], solution[2]) / scale,
+            translation: Vector3::new(solution[3], solution[4], solution[5]),
+            centre,
+        })
+    }
+
+    /// Each touch's signed distance from the aligned surface (ball radius removed) at its plain
+    /// contact, and whether that contact is coherent.
+    pub(super) fn residuals(&self, pose: &Isometry3<f64>) -> Vec<(TouchResidual, bool)> {
+        let part_from_base = pose.inverse();
+        (0..self.touches.len())
+            .map(|index| {
+                let contact = self.contact(index, &part_from_base, Matching::Plain);
+                (
+                    TouchResidual {
+                        id: self.touches[index].id.clone(),
+                        distance_m: contact.signed_distance_m - self.options.tip_radius_m,
+                    },
+                    contact.coherent,
+                )
+            })
+            .collect()
+    }
+}
+
+/// A rigid step: rotation `omega` (rotation vector) about `centre`, then `translation`.
+#[derive(Debug, Clone, Copy)]
+struct Twist {
+    omega: Vector3<f64>,
+    translation: Vector3<f64>,
+    centre: Point3<f64>,
+}
+
+impl Twist {
+    fn from_isometry(step: Isometry3<f64>) -> Self {
+        Self {
+            omega: step.rotation.scaled_axis(),
+            translation: step.translation.vector,
+            centre: Point3::origin(),
+        }
+    }
+
+    /// The step shortened to `fraction` of its rotation and translation: y' = R (y - c) + c + t.
+    fn scaled(&self, fraction: f64) -> Isometry3<f64> {
+        let rotation = UnitQuaternion::from_scaled_axis(self.omega * fraction);
+        let shift =
+            self.centre.coords + self.translation * fraction - rotation * self.centre.coords;
+        Isometry3::from_parts(Translation3::from(shift), rotation)
+    }
+}
