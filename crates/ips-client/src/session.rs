@@ -260,3 +260,22 @@ pub fn flange_pose(pose: &[f64; 6]) -> Result<Isometry3<f64>, String> {
         rotation,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flange_poses_are_rotation_vectors_up_to_pi_and_finite() {
+        let pose = flange_pose(&[0.1, 0.2, 0.3, 0.0, 0.0, std::f64::consts::FRAC_PI_2]);
+        let pose = pose.expect("valid");
+        assert!((pose.translation.vector - Vector3::new(0.1, 0.2, 0.3)).norm() < 1e-15);
+        assert!((pose.rotation * Vector3::x() - Vector3::y()).norm() < 1e-12);
+        let nan = flange_pose(&[0.1, f64::NAN, 0.3, 0.0, 0.0, 0.0]).expect_err("NaN");
+        assert_eq!(nan, "has a non-finite value at position 1");
+        let infinite = flange_pose(&[0.1, 0.2, 0.3, 0.0, f64::INFINITY, 0.0]).expect_err("inf");
+        assert_eq!(infinite, "has a non-finite value at position 4");
+        let degrees = flange_pose(&[0.1, 0.2, 0.3, 0.0, 0.0, 90.0]).expect_err("degrees");
+        assert!(degrees.contains("over pi: is it in degrees?"), "{degrees}");
+    }
+}

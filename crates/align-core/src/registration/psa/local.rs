@@ -107,15 +107,14 @@ impl<'t> Workspace<'t> {
             .approach
             .and_then(|approach| (part_from_base.rotation * -approach).try_normalize(1e-12));
         let cone = self.options.coherence_cone_rad;
+        // Where no surface faces the probe at this pose, the plain contact, marked incoherent.
         if let Matching::Guided(guide_cone) = matching
             && self.options.coherence
             && touch.face.is_none()
             && let Some(facing) = &facing
+            && let Some(found) = self.target.guided_contact(&in_part, facing, guide_cone)
         {
-            if let Some(found) = self.target.guided_contact(&in_part, facing, guide_cone) {
-                return found;
-            }
-            // No surface faces this probe at this pose: the plain contact, marked incoherent.
+            return found;
         }
         self.target
             .plain_contact(self.surfaces[index], &in_part, facing.as_ref(), cone)
