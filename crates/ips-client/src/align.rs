@@ -4,7 +4,10 @@ use align_core::pose::{matrix_rows, xyz_rpy};
 use align_core::registration::psa::{
     PsaMethod, PsaOptions, PsaResult, PsaTarget, Search, align_touches,
 };
-use nalgebra::Isometry3;
+use align_core::registration::uncertainty::{
+    COVARIANCE_ORDER, PoseUncertainty, WeakDirection, pose_uncertainty, sigma_from_residuals,
+};
+use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::BadInput;
@@ -43,7 +46,72 @@ pub struct CandidateJson {
     pub rms: f64,
 }
 
-/// DESIGN.md 6.4 keys, plus `ambiguous`, `candidates`, `starts`, `notes`.
+/// The 95 % confidence region of the part origin's position, mm.
+#[derive(Debug, Serialize)]
+pub struct Position95Json {
+    /// Semi-axes of the 3-dof 95 % ellipsoid, largest first.
+    pub semi_axes: [f64; 3],
+    /// Their unit directions, base frame.
+    pub axes: [[f64; 3]; 3],
+    /// 95 % half-widths (1.96 sd) of x, y, z alone.
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+/// The 95 % confidence region of the orientation (rotation vector, base frame), mrad.
+#[derive(Debug, Serialize)]
+pub struct Rotation95Json {
+    pub semi_axes: [f64; 3],
+    pub axes: [[f64; 3]; 3],
+    pub rx: f64,
+    pub ry: f64,
+    pub rz: f64,
+}
+
+/// The least constrained motion of the part.
+#[derive(Debug, Serialize)]
+pub struct WeakDirectionJson {
+    /// "translation", "rotation" or "screw".
+    pub kind: &'static str,
+    /// Translation direction or rotation axis (unit, base frame).
+    pub axis: [f64; 3],
+    /// A point on the rotation axis (base frame, m); null for a translation.
+    pub point: Option<[f64; 3]>,
+    /// 95 % size (1.96 sd along this one motion) in `unit`.
+    pub size_95: f64,
+    /// "mm" for a translation, "mrad" for a rotation or screw.
+    pub unit: &'static str,
+    /// Screws only: translation along the axis per rotation, m/rad (= mm/mrad).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pitch_m_per_rad: Option<f64>,
+    pub text: String,
+}
+
+/// Pose covariance from the noise and the touch geometry (align_core::registration::uncertainty).
+#[derive(Debug, Serialize)]
+pub struct UncertaintyJson {
+    /// Touch noise the covariance assumes, m.
+    pub sigma_m: f64,
+    /// "declared" (the session's `noise_sigma`) or "estimated" (from the residuals, N - 6 dof).
+    pub sigma_source: &'static str,
+    /// The noise the residuals suggest, sqrt(RSS / (N - 6)), m; null with 6 touches or fewer. Far
+    /// above a declared sigma, the model lacks an effect (`ips diagnose`) and the covariance,
+    /// which assumes the declared noise, is optimistic.
+    pub residual_sigma_m: Option<f64>,
+    /// 6x6 rows in `covariance_order`: rotation vector of the part in the base frame (rad), then
+    /// the part origin's position in the base frame (m).
+    pub covariance: [[f64; 6]; 6],
+    pub covariance_order: [&'static str; 6],
+    pub position_95_mm: Position95Json,
+    pub rotation_95_mrad: Rotation95Json,
+    pub weak_direction: WeakDirectionJson,
+    /// The part point (base frame, m) whose position is known best, if computable.
+    pub least_uncertain_point: Option<[f64; 3]>,
+}
+
+/// DESIGN.md 6.4 keys, plus `ambiguous`, `candidates`, `starts`, `notes`, and from `ips align
+/// SESSION` either `uncertainty` or `uncertainty_error` (why it could not be computed).
 #[derive(Debug, Serialize)]
 pub struct AlignOutput {
     pub pose: PoseJson,
@@ -57,6 +125,10 @@ pub struct AlignOutput {
     pub candidates: Vec<CandidateJson>,
     pub starts: usize,
     pub notes: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<UncertaintyJson>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty_error: Option<String>,
 }
 
 pub fn options_for(args: &AlignArgs, tip_radius_m: f64) -> PsaOptions {
@@ -95,7 +167,96 @@ pub fn run(args: &AlignArgs) -> Result<AlignOutput, BadInput> {
         &options,
     )
     .map_err(|error| BadInput(format!("cannot align: {error}")))?;
-    Ok(output(&result, session.mesh.notes().to_vec()))
+    let mut aligned = output(&result, session.mesh.notes().to_vec());
+    match uncertainty(&session, &result) {
+        Ok(json) => aligned.uncertainty = Some(json),
+        Err(why) => aligned.uncertainty_error = Some(why),
+    }
+    Ok(aligned)
+}
+
+/// The pose's uncertainty at the aligned pose, with the session's declared noise or, when it
+/// declares none, the noise estimated from the residuals; `Err` says why it is not available.
+pub fn uncertainty(session: &LoadedSession, result: &PsaResult) -> Result<UncertaintyJson, String> {
+    let residuals: Vec<f64> = result.residuals.iter().map(|r| r.distance_m).collect();
+    let residual_sigma = sigma_from_residuals(&residuals, 6);
+    let (sigma_m, sigma_source) = match (session.file.noise_sigma, &residual_sigma) {
+        (Some(sigma), _) => (sigma, "declared"),
+        (None, Ok(sigma)) => (*sigma, "estimated"),
+        (None, Err(error)) => {
+            return Err(format!(
+                "no noise_sigma declared and it cannot be estimated: {error}"
+            ));
+        }
+    };
+    let found = pose_uncertainty(
+        &session.mesh,
+        &session.touches,
+        &result.base_from_part,
+        session.tool.tip_radius_m,
+        sigma_m,
+    )
+    .map_err(|error| error.to_string())?;
+    let mut json = uncertainty_json(&found, sigma_source);
+    json.residual_sigma_m = residual_sigma.ok();
+    Ok(json)
+}
+
+fn array(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+fn point_array(p: &Point3<f64>) -> [f64; 3] {
+    [p.x, p.y, p.z]
+}
+
+pub fn uncertainty_json(found: &PoseUncertainty, sigma_source: &'static str) -> UncertaintyJson {
+    let mut covariance = [[0.0; 6]; 6];
+    for (row, values) in covariance.iter_mut().enumerate() {
+        for (col, value) in values.iter_mut().enumerate() {
+            *value = found.covariance[(row, col)];
+        }
+    }
+    let position = &found.position_95_mm;
+    let rotation = &found.rotation_95_mrad;
+    let weak = &found.weak_direction;
+    let (size_95, unit) = weak.size_95();
+    UncertaintyJson {
+        sigma_m: found.sigma_m,
+        sigma_source,
+        residual_sigma_m: None,
+        covariance,
+        covariance_order: COVARIANCE_ORDER,
+        position_95_mm: Position95Json {
+            semi_axes: position.semi_axes,
+            axes: position.axes.map(|a| array(&a)),
+            x: position.half_widths[0],
+            y: position.half_widths[1],
+            z: position.half_widths[2],
+        },
+        rotation_95_mrad: Rotation95Json {
+            semi_axes: rotation.semi_axes,
+            axes: rotation.axes.map(|a| array(&a)),
+            rx: rotation.half_widths[0],
+            ry: rotation.half_widths[1],
+            rz: rotation.half_widths[2],
+        },
+        weak_direction: WeakDirectionJson {
+            kind: weak.kind(),
+            axis: array(&weak.axis()),
+            point: weak.point().map(|p| point_array(&p)),
+            size_95,
+            unit,
+            pitch_m_per_rad: match weak {
+                WeakDirection::Screw {
+                    pitch_m_per_rad, ..
+                } => Some(*pitch_m_per_rad),
+                _ => None,
+            },
+            text: weak.describe(),
+        },
+        least_uncertain_point: found.least_uncertain_point.map(|p| point_array(&p)),
+    }
 }
 
 pub fn output(result: &PsaResult, notes: Vec<String>) -> AlignOutput {
@@ -125,6 +286,8 @@ pub fn output(result: &PsaResult, notes: Vec<String>) -> AlignOutput {
             .collect(),
         starts: result.starts,
         notes,
+        uncertainty: None,
+        uncertainty_error: None,
     }
 }
 
@@ -148,6 +311,36 @@ impl AlignOutput {
             self.rms * 1e3,
             self.max * 1e3
         );
+        if let Some(found) = &self.uncertainty {
+            let position = &found.position_95_mm;
+            let rotation = &found.rotation_95_mrad;
+            text += &format!(
+                "95% confidence (noise sigma {:.4} mm, {}): position +-{:.3} / {:.3} / {:.3} mm (x/y/z), \
+                 rotation +-{:.3} / {:.3} / {:.3} mrad (rx/ry/rz)\n  {}\n",
+                found.sigma_m * 1e3,
+                found.sigma_source,
+                position.x,
+                position.y,
+                position.z,
+                rotation.rx,
+                rotation.ry,
+                rotation.rz,
+                found.weak_direction.text
+            );
+            if let Some(residual) = found.residual_sigma_m
+                && found.sigma_source == "declared"
+                && residual > 2.0 * found.sigma_m
+            {
+                text += &format!(
+                    "  the residuals suggest a noise of {:.4} mm against the declared {:.4} mm: \
+                     the model lacks an effect (ips diagnose) and these limits are optimistic\n",
+                    residual * 1e3,
+                    found.sigma_m * 1e3
+                );
+            }
+        } else if let Some(why) = &self.uncertainty_error {
+            text += &format!("pose uncertainty not available: {why}\n");
+        }
         if self.ambiguous {
             text += &format!(
                 "AMBIGUOUS: {} other poses fit the inspections as well (symmetric part or too few touches); \

@@ -13,6 +13,7 @@ pub mod ppf;
 pub mod psa;
 pub mod sampling;
 pub mod svd;
+pub mod uncertainty;
 
 pub use convergence::{StopCriterion, pose_distance};
 pub use svd::{RegistrationError, weighted_svd};
