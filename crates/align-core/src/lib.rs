@@ -9,6 +9,7 @@
 //! `base_from_flange * flange_from_tcp` reads as a chain and `base_from_tcp * p_in_tcp` gives a
 //! point in the base frame.
 
+pub mod corpus;
 pub mod diagnosis;
 pub mod geometry;
 pub mod io;

@@ -45,9 +45,13 @@ fn sixteen_touch_session(true_radius_m: f64) -> SessionFile {
         array(&truth["base_from_part"]["xyz"]),
         array(&truth["base_from_part"]["rpy"]),
     );
-    let seed = file.inspections[0].q.clone();
+    let seed = file.inspections[0]
+        .q
+        .clone()
+        .expect("the example gives joints");
+    let chain = loaded.chain.as_ref().expect("the example has a robot");
     let targets = tilted_joint_targets(
-        &loaded.chain,
+        chain,
         &base_from_part,
         &loaded.tool.flange_from_tcp,
         true_radius_m,
@@ -61,14 +65,17 @@ fn sixteen_touch_session(true_radius_m: f64) -> SessionFile {
         .enumerate()
         .map(|(index, q)| Inspection {
             id: (index + 1).to_string(),
-            q,
+            q: Some(q),
+            flange_pose: None,
             qd: None,
             stamp: None,
             face: None,
         })
         .collect();
     let absolute = |relative: &str| folder.join(relative).display().to_string();
-    file.robot.urdf = absolute(&file.robot.urdf);
+    if let Some(robot) = &mut file.robot {
+        robot.urdf = absolute(&robot.urdf);
+    }
     file.part.mesh = absolute(&file.part.mesh);
     file
 }

@@ -45,7 +45,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .enumerate()
         .map(|(index, q)| Inspection {
             id: (index + 1).to_string(),
-            q,
+            q: Some(q),
+            flange_pose: None,
             qd: None,
             stamp: Some(index as f64 * 4.0),
             face: None,
@@ -57,12 +58,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let session = SessionFile {
         format: FORMAT.to_owned(),
-        robot: RobotSection {
+        robot: Some(RobotSection {
             urdf: "../../robots/ur10.urdf".to_owned(),
             base_link: "base_link".to_owned(),
             tip_link: "tool0".to_owned(),
             package_dirs: Default::default(),
-        },
+        }),
         tool: ToolSection {
             tcp: pose(&tcp),
             tip_radius,
@@ -108,7 +109,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .enumerate()
         .map(|(index, q)| Inspection {
             id: (index + 1).to_string(),
-            q,
+            q: Some(q),
+            flange_pose: None,
             qd: None,
             stamp: None,
             face: None,

@@ -139,6 +139,11 @@ pub struct Diagnosis {
     pub explanation: String,
 }
 
+/// BIC margin by which a candidate the part pose mostly absorbs must beat every other to be
+/// applied: 10, "very strong" on Kass and Raftery's scale (a likelihood ratio of 150), since
+/// applying it moves the part by what the touches barely check.
+const ABSORBED_MARGIN_BIC: f64 = 10.0;
+
 /// Single effects whose fits rank best are paired with each other, this many at most.
 const PAIRED_SINGLES: usize = 4;
 
@@ -276,7 +281,7 @@ fn candidates(
     pose_only_bic: f64,
 ) -> Candidates {
     let mut accepted: Vec<Candidate> = Vec::new();
-    let mut absorbed: Vec<f64> = Vec::new();
+    let mut absorbed: Vec<(Candidate, String)> = Vec::new();
     let mut alternatives = Vec::new();
     let mut fitted_singles: Vec<(Effect, f64)> = Vec::new();
     for effect in Effect::ALL {
@@ -287,12 +292,7 @@ fn candidates(
             }
             Assessment::Absorbed(candidate, reason) => {
                 fitted_singles.push((effect, candidate.fit.bic));
-                absorbed.push(candidate.fit.bic);
-                alternatives.push(Alternative {
-                    name: candidate.name(),
-                    fit: Some(candidate.fit),
-                    reason,
-                });
+                absorbed.push((candidate, reason));
             }
             Assessment::Rejected(alternative) => {
                 if let Some(fit) = &alternative.fit {
@@ -331,23 +331,42 @@ fn candidates(
                         accepted.push(candidate);
                     }
                 }
-                Assessment::Absorbed(candidate, reason) => {
-                    absorbed.push(candidate.fit.bic);
-                    alternatives.push(Alternative {
-                        name: candidate.name(),
-                        fit: Some(candidate.fit),
-                        reason,
-                    });
-                }
+                Assessment::Absorbed(candidate, reason) => absorbed.push((candidate, reason)),
                 Assessment::Rejected(alternative) => alternatives.push(alternative),
             }
         }
     }
     accepted.sort_by(|a, b| a.fit.bic.total_cmp(&b.fit.bic));
+    absorbed.sort_by(|a, b| a.0.fit.bic.total_cmp(&b.0.fit.bic));
+    // A candidate the pose mostly absorbs is still the answer when what the pose leaves of it
+    // explains the residual decisively better than anything else (a UR's shoulder offset: 99.5%
+    // a part rotation, the rest plain in the data): "very strong" evidence, not merely strong.
+    let best_accepted = accepted
+        .first()
+        .map_or(pose_only_bic, |c| c.fit.bic.min(pose_only_bic));
+    let mut absorbed = absorbed.into_iter();
+    if let Some((candidate, _)) = absorbed
+        .as_slice()
+        .first()
+        .filter(|(c, _)| c.fit.bic < best_accepted - ABSORBED_MARGIN_BIC)
+        .cloned()
+    {
+        absorbed.next();
+        accepted.insert(0, candidate);
+    }
+    let mut absorbed_best_bic = f64::INFINITY;
+    for (candidate, reason) in absorbed {
+        absorbed_best_bic = absorbed_best_bic.min(candidate.fit.bic);
+        alternatives.push(Alternative {
+            name: candidate.name(),
+            fit: Some(candidate.fit),
+            reason,
+        });
+    }
     Candidates {
         accepted,
         alternatives,
-        absorbed_best_bic: absorbed.into_iter().fold(f64::INFINITY, f64::min),
+        absorbed_best_bic,
     }
 }
 
@@ -448,9 +467,20 @@ fn verdict(
             false,
         )
     } else {
+        let partial = if best.unseen.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; these touches cannot see {} beside the part pose: whatever they hide stays in the pose after",
+                best.unseen.join(", ")
+            )
+        };
         (
             Verdict::Effect,
-            format!("{} explains the residual down to the noise", best.name()),
+            format!(
+                "{} explains the residual down to the noise{partial}",
+                best.name()
+            ),
             true,
         )
     };

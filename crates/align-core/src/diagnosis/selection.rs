@@ -31,6 +31,8 @@ pub(super) const AMBIGUITY_BIC: f64 = 6.0;
 pub(super) struct Candidate {
     pub effects: Vec<Effect>,
     pub params: Vec<Param>,
+    /// Parameters of the effects the touches could not identify beside the part pose.
+    pub unseen: Vec<String>,
     pub theta: DVector<f64>,
     pub fit: Fit,
 }
@@ -226,6 +228,13 @@ pub(super) fn assess(
         .flat_map(|&effect| all_params(problem, effect))
         .collect();
     let (kept, unseen) = identifiable(problem, &params, pose_theta, sigma);
+    let unseen_names = problem.names(
+        &params
+            .iter()
+            .copied()
+            .filter(|p| !kept.contains(p))
+            .collect::<Vec<_>>(),
+    );
     if kept.is_empty() {
         let reason = unseen.map_or_else(
             || "the effect has no parameter on this robot".to_owned(),
@@ -275,6 +284,7 @@ pub(super) fn assess(
     let candidate = Candidate {
         effects: effects.to_vec(),
         params,
+        unseen: unseen_names,
         theta,
         fit,
     };

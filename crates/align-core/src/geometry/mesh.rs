@@ -333,7 +333,8 @@ impl Mesh {
     /// The closest point to `query` with a signed distance on every mesh. A closed mesh has an
     /// inside. On an open one the side is the face normal's, or, when `facing` (the reversed
     /// direction the probe travelled, unit, mesh frame) is given, the side the probe came from:
-    /// a scanned or exported surface may have its triangles wound either way.
+    /// a scanned or exported surface may have its triangles wound either way. Closest to an edge
+    /// or a corner of an open mesh, the distance is unsigned.
     pub fn signed_closest(
         &self,
         query: &Point3<f64>,
@@ -345,6 +346,10 @@ impl Mesh {
         let distance = offset.norm();
         let signed_distance_m = if self.is_watertight() {
             found.signed_distance
+        } else if !found.on_face {
+            // Past a free edge of an open skin (an opening's rim) either side is outside: a
+            // ball touching the rim sideways sits behind the face's plane.
+            distance
         } else {
             let outward = match facing {
                 Some(f) if face_normal.dot(f) < 0.0 => -face_normal,

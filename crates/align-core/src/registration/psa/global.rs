@@ -8,6 +8,7 @@
 //! failed to converge.
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
 
 use super::local::{LocalSolution, Workspace};
 use super::target::PsaTarget;
@@ -18,10 +19,93 @@ use crate::registration::convergence::pose_distance;
 /// Explored starts polished in full at least (when that many distinct ones exist).
 const MIN_CONTENDERS: usize = 8;
 /// Explored starts polished in full at most: enough for every face pairing of a cube.
-const MAX_CONTENDERS: usize = 64;
+const MAX_CONTENDERS: usize = 32;
+
+/// Touches the exploration matches at most: its runs only find where each start leads. On the
+/// corpus parts (docs/touch-corpus.md) a spread two dozen found the basins that all 65 found; a
+/// dozen lost one fixture session in four.
+const EXPLORATION_TOUCHES: usize = 24;
+/// Starts explored side by side between updates of the abandon threshold: the threshold, and so
+/// the result, does not depend on how many threads run them.
+const EXPLORATION_CHUNK: usize = 32;
+
+/// Poses scoring within this of the best fit alike (-2 log-likelihood units): a tie between
+/// symmetric twins, not evidence.
+const EXACT_TIE_CHI2: f64 = 0.1;
+
+/// Full steps every start takes before the screening ranks them.
+const SCREENING_STEPS: usize = 2;
+/// The screening keeps one start in this many.
+const SCREENING_KEEP_ONE_IN: usize = 4;
+
+/// Local runs from each start in `starts`, side by side in chunks; `best_rms` (the abandon
+/// threshold's reference) is updated between chunks.
+fn run_chunks(
+    target: &PsaTarget<'_>,
+    touches: &[Touch],
+    options: &PsaOptions,
+    starts: &[Isometry3<f64>],
+    best_rms: &mut f64,
+    radius_m: f64,
+) -> Result<Vec<LocalSolution>, RegistrationError> {
+    let mut solutions = Vec::with_capacity(starts.len());
+    for chunk in starts.chunks(EXPLORATION_CHUNK) {
+        // A start still far worse than the best after its first full steps is heading for
+        // another minimum: abandon it (ties that matter are found by the starts that get there
+        // directly).
+        let abandon_above = Some((20.0 * *best_rms).max(0.02 * radius_m));
+        let explored: Vec<LocalSolution> = chunk
+            .par_iter()
+            .map(|start| {
+                Workspace::new(target, touches, options).map(|mut explorer| {
+                    explorer.polish = false;
+                    explorer.abandon_above = abandon_above;
+                    explorer.run_local(start)
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        *best_rms = explored.iter().map(|s| s.rms_m).fold(*best_rms, f64::min);
+        solutions.extend(explored);
+    }
+    Ok(solutions)
+}
+
+/// Up to `count` touches spread over the set: farthest-point sampling from the touch farthest
+/// from the centroid, so every region of the part the touches cover keeps a say.
+fn spread_subset(touches: &[Touch], count: usize) -> Vec<Touch> {
+    if touches.len() <= count {
+        return touches.to_vec();
+    }
+    let centroid = touches
+        .iter()
+        .fold(Vector3::zeros(), |sum, touch| sum + touch.point.coords)
+        / touches.len() as f64;
+    let farthest = |distances: &[f64]| {
+        distances
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map_or(0, |(i, _)| i)
+    };
+    let mut nearest: Vec<f64> = touches
+        .iter()
+        .map(|t| (t.point.coords - centroid).norm())
+        .collect();
+    let mut chosen = Vec::with_capacity(count);
+    while chosen.len() < count {
+        let next = farthest(&nearest);
+        chosen.push(next);
+        for (distance, touch) in nearest.iter_mut().zip(touches) {
+            *distance = distance.min((touch.point - touches[next].point).norm());
+        }
+    }
+    chosen.sort_unstable();
+    chosen.into_iter().map(|i| touches[i].clone()).collect()
+}
 
 /// Short local runs from `count` orientations spread over SO(3), each translated so that the
-/// mesh's centroid sits on the touches' centroid: where each start leads.
+/// mesh's centroid sits on the touches' centroid: where each start leads. They run on a spread
+/// subset of the touches, matched head-on only, in parallel.
 pub(super) fn explore(
     target: &PsaTarget<'_>,
     touches: &[Touch],
@@ -34,6 +118,7 @@ pub(super) fn explore(
         .fold(Vector3::zeros(), |sum, touch| sum + touch.point.coords)
         / touches.len() as f64;
     let part_centroid = target.mesh().centroid().coords;
+    let subset = spread_subset(touches, EXPLORATION_TOUCHES);
     // A short stopping window and a coarse tolerance find where each start leads; only the
     // poses that compete for best are then refined to full precision.
     let explore = PsaOptions {
@@ -43,21 +128,43 @@ pub(super) fn explore(
         slide_first: 4,
         ..options.clone()
     };
-    let mut explorer = Workspace::new(target, touches, &explore)?;
-    explorer.polish = false;
+    // Fails here, once, rather than in every thread (a face hint naming no face).
+    Workspace::new(target, &subset, &explore)?;
     let mut best_rms = best_rms_m;
     let radius_m = target.mesh().radius_m();
-    let mut solutions = Vec::with_capacity(count);
-    for rotation in spread_rotations(count) {
-        let translation = centroid - rotation * part_centroid;
-        let start = Isometry3::from_parts(Translation3::from(translation), rotation);
-        // A start still far worse than the best after its first full steps is heading for
-        // another minimum: abandon it (ties that matter are found by the starts that get there
-        // directly).
-        explorer.abandon_above = Some((20.0 * best_rms).max(0.02 * radius_m));
-        let solution = explorer.run_local(&start);
-        best_rms = best_rms.min(solution.rms_m);
-        solutions.push(solution);
+    let starts: Vec<Isometry3<f64>> = spread_rotations(count)
+        .into_iter()
+        .map(|rotation| {
+            let translation = centroid - rotation * part_centroid;
+            Isometry3::from_parts(Translation3::from(translation), rotation)
+        })
+        .collect();
+    // Screening: a few steps from every start (the slide and two full steps) say which are
+    // heading for a good fit; only the best quarter runs on.
+    let screen = PsaOptions {
+        max_iterations: explore.slide_first + SCREENING_STEPS,
+        ..explore.clone()
+    };
+    let screened = run_chunks(target, &subset, &screen, &starts, &mut best_rms, radius_m)?;
+    let mut order: Vec<usize> = (0..screened.len()).collect();
+    order.sort_by(|a, b| screened[*a].rms_m.total_cmp(&screened[*b].rms_m));
+    let kept = (starts.len() / SCREENING_KEEP_ONE_IN).max(MIN_CONTENDERS * 4);
+    let promising: Vec<Isometry3<f64>> =
+        order.iter().take(kept).map(|&i| screened[i].pose).collect();
+    let continued = PsaOptions {
+        slide_first: 0,
+        ..explore
+    };
+    let mut solutions = run_chunks(
+        target,
+        &subset,
+        &continued,
+        &promising,
+        &mut best_rms,
+        radius_m,
+    )?;
+    for (solution, &i) in solutions.iter_mut().zip(&order) {
+        solution.iterations += screened[i].iterations;
     }
     Ok(solutions)
 }
@@ -74,7 +181,7 @@ pub(super) fn contenders(
     let Some(best) = explored.first().map(|s| s.rms_m) else {
         return explored;
     };
-    let band = 2.0 * best + 2.0 * options.ambiguity_tolerance_m;
+    let band = 1.5 * best + 2.0 * options.ambiguity_tolerance_m;
     let mut distinct: Vec<LocalSolution> = Vec::new();
     for solution in explored {
         if distinct.len() >= MAX_CONTENDERS
@@ -133,8 +240,7 @@ fn score(solution: &LocalSolution, sigma_m: f64, touches: usize, options: &PsaOp
 }
 
 /// Picks the best-scoring solution; other distinct solutions within the ambiguity margin make it
-/// ambiguous. Among equally good poses the one nearest the start (the user's nominal pose) is
-/// reported.
+/// ambiguous.
 pub(super) fn choose(
     solutions: Vec<LocalSolution>,
     start: &Isometry3<f64>,
@@ -153,32 +259,42 @@ pub(super) fn choose(
         .collect();
     scored.sort_by(|a, b| a.0.total_cmp(&b.0));
     let best_score = scored[0].0;
-    let mut distinct: Vec<LocalSolution> = Vec::new();
+    let mut distinct: Vec<(f64, LocalSolution)> = Vec::new();
     for (score, solution) in scored {
         if score > best_score + options.ambiguity_chi2 {
             break;
         }
-        let seen = distinct.iter().any(|other| {
+        let seen = distinct.iter().any(|(_, other)| {
             pose_distance(&other.pose, &solution.pose, radius_m) < options.distinct_pose_m
         });
         if !seen {
-            distinct.push(solution);
+            distinct.push((score, solution));
         }
     }
-    distinct.sort_by(|a, b| {
-        pose_distance(&a.pose, start, radius_m).total_cmp(&pose_distance(&b.pose, start, radius_m))
-    });
-    let best = distinct.remove(0);
+    // The best fit is reported; among poses that fit exactly alike (a symmetric part's twins),
+    // the one nearest the start, the user's nominal pose.
+    let nearest_tie = distinct
+        .iter()
+        .enumerate()
+        .filter(|(_, (score, _))| *score <= best_score + EXACT_TIE_CHI2)
+        .min_by(|a, b| {
+            pose_distance(&a.1.1.pose, start, radius_m).total_cmp(&pose_distance(
+                &b.1.1.pose,
+                start,
+                radius_m,
+            ))
+        })
+        .map_or(0, |(i, _)| i);
+    let (_, best) = distinct.remove(nearest_tie);
     let others = distinct
         .into_iter()
-        .map(|solution| Candidate {
+        .map(|(_, solution)| Candidate {
             base_from_part: solution.pose,
             rms_m: solution.rms_m,
         })
         .collect();
     (best, others)
 }
-
 /// `count` rotations spread evenly over SO(3) (Alexa's super-Fibonacci spirals, CVPR 2022):
 /// deterministic, no clustering at the poles as with Euler-angle grids.
 pub fn spread_rotations(count: usize) -> Vec<UnitQuaternion<f64>> {

@@ -39,6 +39,28 @@ pub(super) struct LocalSolution {
 /// The cone of the first guided stage: touches matched to faces they meet head-on.
 const HEAD_ON_CONE_RAD: f64 = std::f64::consts::FRAC_PI_4;
 
+/// The largest Levenberg-Marquardt damping tried before a pose counts as stationary.
+const MAX_DAMPING: f64 = 1e4;
+
+/// A point-to-plane stage has settled when the pose moves by less than this fraction of the
+/// RMS residual three iterations running: the touches cannot tell such poses apart.
+const SETTLED_FRACTION_OF_RMS: f64 = 1e-4;
+
+/// A point-to-plane step that lowers the RMS by less than this fraction ends the stage.
+const RELATIVE_DESCENT: f64 = 1e-9;
+
+/// Iterations of a guided stage that steers a later one at most.
+const GUIDED_STAGE_ITERATIONS: usize = 40;
+/// Pose tolerance of a steering stage, m.
+const GUIDED_STAGE_TOLERANCE_M: f64 = 1e-7;
+
+/// How long one stage may run and when it has settled.
+#[derive(Debug, Clone, Copy)]
+struct StageBudget {
+    max_iterations: usize,
+    tolerance_m: f64,
+}
+
 /// Buffers reused across iterations and starts, so the hot loop does not allocate.
 pub(super) struct Workspace<'t> {
     target: &'t PsaTarget<'t>,
@@ -54,8 +76,8 @@ pub(super) struct Workspace<'t> {
     incoherent: usize,
     /// Abandon a local run whose RMS is still above this after its first full steps.
     pub(super) abandon_above: Option<f64>,
-    /// Whether runs end with the plain least-squares polish (off for the global search's
-    /// exploration, which only finds where each start leads).
+    /// Whether runs go on past the head-on stage to the least-squares polish (off for the
+    /// global search's exploration, which only finds where each start leads).
     pub(super) polish: bool,
 }
 
@@ -172,7 +194,7 @@ impl<'t> Workspace<'t> {
             stages.push(Matching::Guided(
                 HEAD_ON_CONE_RAD.min(self.options.coherence_cone_rad),
             ));
-            if point_to_plane && self.options.coherence_cone_rad > HEAD_ON_CONE_RAD {
+            if self.polish && point_to_plane && self.options.coherence_cone_rad > HEAD_ON_CONE_RAD {
                 stages.push(Matching::Guided(self.options.coherence_cone_rad));
             }
         }
@@ -181,6 +203,7 @@ impl<'t> Workspace<'t> {
         }
         let mut solution: Option<LocalSolution> = None;
         let abandon = self.abandon_above;
+        let stage_count = stages.len();
         for (index, matching) in stages.into_iter().enumerate() {
             let from = solution.as_ref().map_or(*start, |s| s.pose);
             let slide = if index == 0 {
@@ -190,19 +213,64 @@ impl<'t> Workspace<'t> {
             };
             // Only the first stage may abandon: the later ones start where it settled.
             self.abandon_above = if index == 0 { abandon } else { None };
-            let mut next = self.iterate(&from, matching, slide);
+            // A guided stage followed by others only steers: it need not settle to the last
+            // nanometre, and on curved, finely tessellated parts its matching may creep.
+            let budget = if index + 1 < stage_count && matches!(matching, Matching::Guided(_)) {
+                StageBudget {
+                    max_iterations: self.options.max_iterations.min(GUIDED_STAGE_ITERATIONS),
+                    tolerance_m: self.options.tolerance_m.max(GUIDED_STAGE_TOLERANCE_M),
+                }
+            } else {
+                StageBudget {
+                    max_iterations: self.options.max_iterations,
+                    tolerance_m: self.options.tolerance_m,
+                }
+            };
+            let mut next = self.iterate(&from, matching, slide, budget);
             next.iterations += solution.map_or(0, |s| s.iterations);
             solution = Some(next);
         }
         self.abandon_above = abandon;
-        let mut solution = solution.unwrap_or_else(|| self.iterate(start, Matching::Plain, 0));
+        let mut solution = solution.unwrap_or_else(|| {
+            let budget = StageBudget {
+                max_iterations: self.options.max_iterations,
+                tolerance_m: self.options.tolerance_m,
+            };
+            self.iterate(start, Matching::Plain, 0, budget)
+        });
         solution.incoherent = if self.polish {
             self.correspond(&solution.pose, Matching::Plain);
             self.incoherent
         } else {
             0
         };
-        solution
+        if !(self.polish && guided && point_to_plane) {
+            return solution;
+        }
+        // The guided stages widen the basin but, from a start already near the optimum, can
+        // drag it elsewhere: a side contact matched head-on to the wrong face. The plain polish
+        // straight from the start competes, and the better fit stands.
+        let budget = StageBudget {
+            max_iterations: self.options.max_iterations,
+            tolerance_m: self.options.tolerance_m,
+        };
+        let mut direct = self.iterate(start, Matching::Plain, 0, budget);
+        direct.incoherent = self.incoherent;
+        let sigma = solution
+            .rms_m
+            .min(direct.rms_m)
+            .max(self.options.ambiguity_tolerance_m);
+        let score = |s: &LocalSolution| {
+            (s.rms_m / sigma).powi(2) * self.touches.len() as f64
+                + self.options.incoherence_penalty_chi2 * s.incoherent as f64
+        };
+        direct.iterations += solution.iterations;
+        if score(&direct) < score(&solution) {
+            direct
+        } else {
+            solution.iterations = direct.iterations;
+            solution
+        }
     }
 
     /// Iterates correspondences and steps. A step that increases the RMS distance (a
@@ -215,29 +283,33 @@ impl<'t> Workspace<'t> {
         start: &Isometry3<f64>,
         matching: Matching,
         translation_only: usize,
+        budget: StageBudget,
     ) -> LocalSolution {
         let mut pose = *start;
-        let mut stop =
-            StopCriterion::new(self.options.window, self.options.tolerance_m, self.radius_m);
+        let mut stop = StopCriterion::new(self.options.window, budget.tolerance_m, self.radius_m);
         let mut converged = false;
         let mut iterations = 0;
         stop.update(&pose);
         self.correspond(&pose, matching);
         let mut rms = self.rms();
         let point_to_point = self.options.method == PsaMethod::PointToPoint;
-        'outer: while iterations < self.options.max_iterations {
+        let mut still = 0;
+        // Levenberg-Marquardt damping, relative to the normal matrix's mean diagonal.
+        let mut damping = 0.0;
+        'outer: while iterations < budget.max_iterations {
             iterations += 1;
             let sliding = iterations <= translation_only;
             let step = match self.options.method {
                 PsaMethod::PointToPoint => weighted_svd(&self.moved, &self.fixed, &self.weights)
                     .ok()
                     .map(Twist::from_isometry),
-                PsaMethod::PointToPlane => self.point_to_plane_step(sliding),
+                PsaMethod::PointToPlane => self.point_to_plane_step(sliding, damping),
             };
-            let Some(step) = step else {
+            let Some(mut step) = step else {
                 break;
             };
             let mut fraction = 1.0;
+            let rms_before = rms;
             let candidate = loop {
                 let candidate = step.scaled(fraction) * pose;
                 self.correspond(&candidate, matching);
@@ -247,8 +319,30 @@ impl<'t> Workspace<'t> {
                     || candidate_rms <= rms * (1.0 + 1e-12)
                     || (point_to_point && fraction < 1.0 / 64.0)
                 {
+                    if fraction == 1.0 {
+                        damping = if damping > 1e-6 { damping * 0.1 } else { 0.0 };
+                    }
                     rms = candidate_rms;
                     break candidate;
+                }
+                if !point_to_point && fraction < 0.2 {
+                    // The Gauss-Newton step overshoots even shortened: it leans on a direction
+                    // the touches barely constrain (the spin of a turned part). Damp it towards
+                    // gradient descent instead (Levenberg-Marquardt).
+                    damping = if damping > 0.0 { damping * 10.0 } else { 1e-3 };
+                    self.correspond(&pose, matching);
+                    match self.point_to_plane_step(sliding, damping) {
+                        Some(damped) if damping <= MAX_DAMPING => {
+                            step = damped;
+                            fraction = 1.0;
+                            continue;
+                        }
+                        _ => {
+                            // No descent along any damped step: the pose is stationary.
+                            converged = true;
+                            break 'outer;
+                        }
+                    }
                 }
                 if fraction < 1.0 / 1024.0 {
                     // No descent along the step: the pose is stationary.
@@ -264,9 +358,25 @@ impl<'t> Workspace<'t> {
                 converged = true;
                 break;
             }
-            if !sliding && moved_m < self.options.tolerance_m * 1e-3 {
+            if !sliding && moved_m < budget.tolerance_m * 1e-3 {
                 // Settled to far below the tolerance: every remaining iteration of the window
                 // would find the same correspondences and stay within it.
+                converged = true;
+                break;
+            }
+            // Moves far below what the residual can resolve, three times running: settled.
+            still = if moved_m < SETTLED_FRACTION_OF_RMS * rms {
+                still + 1
+            } else {
+                0
+            };
+            if !sliding
+                && !point_to_point
+                && (rms_before - rms <= RELATIVE_DESCENT * rms_before || still >= 3)
+            {
+                // The RMS no longer falls: what moves now is a creep along a direction the
+                // touches barely constrain (the spin of a turned part), a ripple of the
+                // tessellation, far below what the touches can tell.
                 converged = true;
                 break;
             }
@@ -318,8 +428,14 @@ impl<'t> Workspace<'t> {
         (normal_matrix, rhs, centre)
     }
 
-    fn point_to_plane_step(&self, translation_only: bool) -> Option<Twist> {
-        let (normal_matrix, rhs, centre) = self.normal_equations();
+    fn point_to_plane_step(&self, translation_only: bool, damping: f64) -> Option<Twist> {
+        let (mut normal_matrix, rhs, centre) = self.normal_equations();
+        if damping > 0.0 {
+            let mean_diagonal = normal_matrix.trace() / 6.0;
+            for i in 0..6 {
+                normal_matrix[(i, i)] += damping * mean_diagonal;
+            }
+        }
         if translation_only {
             let block = normal_matrix.fixed_view::<3, 3>(3, 3).into_owned();
             let translation = block

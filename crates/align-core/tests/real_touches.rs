@@ -1,0 +1,332 @@
+//! Alignment and diagnosis on touches made another way than the simulator's planner
+//! (`align_core::corpus`): CAD-like parts, touches anywhere the probe fits, tilts up to 60
+//! degrees plus side contacts at 90, 0.3-0.5 mm noise, blind starts, a robot built from a
+//! published DH table with another base convention, effects nobody declared.
+
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+use align_core::corpus::parts::{fixture_plate, thin_wall_bracket};
+use align_core::corpus::robots::ur5e_dh_urdf;
+use align_core::corpus::sessions::{
+    HiddenEffects, JointSession, ProbeTool, SessionRobot, generate_session,
+};
+use align_core::corpus::touches::{TouchOptions, blind_start, on_table, sample_touches};
+use align_core::diagnosis::{TouchSample, Verdict, diagnose};
+use align_core::geometry::Mesh;
+use align_core::kinematics::{Chain, PackageMap, RobotModel};
+use align_core::registration::pose_distance;
+use align_core::registration::psa::{
+    PsaOptions, PsaResult, PsaTarget, Search, Touch, align_touches,
+};
+use align_core::rng::SplitMix64;
+use align_core::tool::Tool;
+use nalgebra::{Isometry3, Vector3};
+
+fn psa_touches(set: &[align_core::corpus::touches::SampledTouch]) -> Vec<Touch> {
+    set.iter()
+        .map(|t| {
+            let mut touch = Touch::new(t.id.clone(), t.ball_centre_in_base);
+            touch.approach = Some(t.approach_in_base);
+            touch
+        })
+        .collect()
+}
+
+/// The least-squares optimum the touches support: a plain local fit from the truth.
+fn optimum(
+    target: &PsaTarget<'_>,
+    touches: &[Touch],
+    truth: &Isometry3<f64>,
+    radius: f64,
+) -> PsaResult {
+    let options = PsaOptions {
+        tip_radius_m: radius,
+        search: Search::Local,
+        coherence: false,
+        ..PsaOptions::default()
+    };
+    align_touches(target, touches, truth, &options).unwrap()
+}
+
+/// Regression (real touch sets, issue 18): the 45-degree coherence cone rejected true contacts
+/// and the blind global search landed 45-216 mm off. Touches tilted up to 60 degrees with side
+/// contacts at 90, 0.3-0.5 mm noise, a blind start: the result is the least-squares optimum.
+#[test]
+fn blind_global_alignment_of_steeply_tilted_noisy_touches_finds_the_least_squares_optimum() {
+    let parts: [(&str, Mesh); 2] = [
+        ("fixture_plate", fixture_plate().unwrap()),
+        ("thin_wall_bracket", thin_wall_bracket().unwrap()),
+    ];
+    let options = TouchOptions {
+        floor_z_in_base: Some(0.0),
+        ..TouchOptions::default()
+    };
+    let (mut found, mut sessions) = (0, 0);
+    for (name, mesh) in &parts {
+        let target = PsaTarget::new(mesh);
+        for session in 0..3u64 {
+            sessions += 1;
+            let mut rng = SplitMix64::new(0x5eed_0000 + session);
+            let truth = on_table(mesh, rng.uniform() * std::f64::consts::TAU, [0.5, 0.0], 0.0);
+            let set = sample_touches(mesh, &truth, 20, &options, &mut rng).unwrap();
+            assert!(
+                set.touches.iter().filter(|t| t.tilt_rad > 0.8).count() >= 3,
+                "steep touches drawn"
+            );
+            let touches = psa_touches(&set.touches);
+            let best = optimum(&target, &touches, &truth, options.ball_radius_m);
+            let start = blind_start(&set.touches, mesh, &mut rng);
+            let result = align_touches(
+                &target,
+                &touches,
+                &start,
+                &PsaOptions {
+                    tip_radius_m: options.ball_radius_m,
+                    ..PsaOptions::default()
+                },
+            )
+            .unwrap();
+            let apart = pose_distance(
+                &result.base_from_part,
+                &best.base_from_part,
+                mesh.radius_m(),
+            );
+            assert!(result.converged, "{name} session {session}");
+            if apart < 1e-3 && result.rms_m <= best.rms_m * 1.01 + 1e-6 {
+                found += 1;
+                assert!(result.incoherent.is_empty(), "{:?}", result.incoherent);
+            } else {
+                println!(
+                    "{name} session {session}: {:.1} mm from the optimum, rms {:.4} mm against {:.4} mm",
+                    apart * 1e3,
+                    result.rms_m * 1e3,
+                    best.rms_m * 1e3
+                );
+            }
+        }
+    }
+    // Not yet every session: measured 5 of 6 (fixture_plate session 1 ends in another minimum,
+    // rms 1.16 mm against 0.33 mm); docs/touch-corpus.md has the larger table.
+    assert!(found >= 5, "{found}/{sessions} at the optimum");
+}
+
+/// Regression: the local fit stopped "NOT converged after 330 iterations" above the optimum.
+/// Property over 24 seeded sessions with tilts up to 90 degrees: from a start 5-10 mm and a few
+/// degrees off, the default local fit always converges, and to the least-squares optimum (or a
+/// better fit) in at least 22.
+#[test]
+fn local_fit_with_tilts_up_to_90_degrees_converges_to_the_least_squares_optimum() {
+    let mesh = fixture_plate().unwrap();
+    let target = PsaTarget::new(&mesh);
+    let options = TouchOptions {
+        max_tilt_rad: 90f64.to_radians(),
+        floor_z_in_base: Some(0.0),
+        ..TouchOptions::default()
+    };
+    let (mut at_optimum, mut refused) = (0, 0);
+    for session in 0..24u64 {
+        let mut rng = SplitMix64::new(0x90de_0000 + session);
+        let truth = on_table(
+            &mesh,
+            rng.uniform() * std::f64::consts::TAU,
+            [0.5, 0.1],
+            0.0,
+        );
+        let set = sample_touches(&mesh, &truth, 16, &options, &mut rng).unwrap();
+        let touches = psa_touches(&set.touches);
+        let Ok(best) = align_touches(
+            &target,
+            &touches,
+            &truth,
+            &PsaOptions {
+                tip_radius_m: options.ball_radius_m,
+                search: Search::Local,
+                coherence: false,
+                ..PsaOptions::default()
+            },
+        ) else {
+            // Sixteen touches drawn by area can leave a motion free: refused, tested elsewhere.
+            refused += 1;
+            continue;
+        };
+        let offset = Isometry3::new(
+            rng.unit_vector() * (0.005 + 0.005 * rng.uniform()),
+            rng.unit_vector() * 0.04 * rng.uniform(),
+        );
+        let start = truth * offset;
+        let result = align_touches(
+            &target,
+            &touches,
+            &start,
+            &PsaOptions {
+                tip_radius_m: options.ball_radius_m,
+                search: Search::Local,
+                ..PsaOptions::default()
+            },
+        );
+        let Ok(result) = result else {
+            refused += 1;
+            continue;
+        };
+        let apart = pose_distance(
+            &result.base_from_part,
+            &best.base_from_part,
+            mesh.radius_m(),
+        );
+        assert!(
+            result.converged,
+            "session {session}: {} iterations",
+            result.iterations
+        );
+        if apart < 1e-5 || result.rms_m < best.rms_m {
+            at_optimum += 1;
+        } else {
+            println!(
+                "session {session}: another minimum {:.2} mm from the optimum, rms {:.4} against {:.4} mm",
+                apart * 1e3,
+                result.rms_m * 1e3,
+                best.rms_m * 1e3
+            );
+        }
+    }
+    // A closest-point method has a basin: 10 mm off, with a quarter of the touches at 60-90
+    // degrees, one start in 24 lands in a neighbouring minimum (measured: session 15).
+    assert!(
+        at_optimum + refused >= 22,
+        "{at_optimum}/{} at the optimum",
+        24 - refused
+    );
+}
+
+fn ur5e() -> Chain {
+    RobotModel::from_urdf_str(&ur5e_dh_urdf(), &PackageMap::new())
+        .unwrap()
+        .chain("base_link", "flange")
+        .unwrap()
+}
+
+fn session_on(
+    chain: &Chain,
+    hidden: &HiddenEffects,
+    mesh: &Mesh,
+    count: usize,
+    sigma_m: f64,
+    seed: u64,
+) -> JointSession {
+    let tool = ProbeTool::straight(0.15, 0.003);
+    let seeds = vec![
+        vec![0.0, -1.3, 1.6, -1.9, -1.57, 0.0],
+        vec![0.6, -1.0, 1.2, -1.7, -1.57, 0.5],
+        vec![-0.6, -1.6, 2.0, -2.0, -1.57, -0.5],
+    ];
+    let robot = SessionRobot {
+        chain,
+        tool: &tool,
+        hidden,
+        seeds: &seeds,
+    };
+    let options = TouchOptions {
+        max_tilt_rad: 35f64.to_radians(),
+        side_contact_fraction: 0.0,
+        sigma_range_m: (sigma_m, sigma_m),
+        ..TouchOptions::default()
+    };
+    let mut rng = SplitMix64::new(seed);
+    generate_session(&robot, mesh, count, &options, &mut rng).unwrap()
+}
+
+fn samples(session: &JointSession) -> Vec<TouchSample> {
+    session
+        .touches
+        .iter()
+        .map(|t| TouchSample::from_joints(t.touch.id.clone(), t.q_reported.clone(), None))
+        .collect()
+}
+
+fn aligned(chain: &Chain, tool: &Tool, mesh: &Mesh, session: &JointSession) -> Isometry3<f64> {
+    let touches: Vec<Touch> = session
+        .touches
+        .iter()
+        .map(|t| {
+            let tcp = chain.forward(&t.q_reported).unwrap() * tool.flange_from_tcp;
+            let mut touch = Touch::new(t.touch.id.clone(), tcp.translation.vector.into());
+            touch.approach = Some(tcp.rotation * Vector3::z());
+            touch
+        })
+        .collect();
+    align_touches(
+        &PsaTarget::new(mesh),
+        &touches,
+        &session.base_from_part_truth,
+        &PsaOptions {
+            tip_radius_m: tool.tip_radius_m,
+            search: Search::Local,
+            ..PsaOptions::default()
+        },
+    )
+    .unwrap()
+    .base_from_part
+}
+
+/// Regression (independent synthetic sessions, issue 18): encoder offsets of 2-3 mrad on a UR's
+/// three parallel joints together were never found (the parameter reduction dropped what the
+/// data needed). A UR5e built from UR's DH table with ROS-Industrial's base turn, 24 touches.
+#[test]
+fn offsets_on_the_three_parallel_joints_of_a_ur_together_are_found() {
+    let chain = ur5e();
+    let mesh = fixture_plate().unwrap();
+    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
+    let mut hidden = HiddenEffects::none(6);
+    hidden.joint_offsets_rad = vec![0.0, 2e-3, -3e-3, 2.5e-3, 0.0, 0.0];
+    let sigma = 5e-5;
+    let mut found = 0;
+    for seed in [11, 12, 13] {
+        let session = session_on(&chain, &hidden, &mesh, 24, sigma, seed);
+        let samples = samples(&session);
+        let start = aligned(&chain, &tool, &mesh, &session);
+        let diagnosis = diagnose(Some(&chain), &tool, &mesh, &samples, &start, sigma).unwrap();
+        let report = format!(
+            "{} ({}); before {:.1} um, after {:.1} um; {:?}; alternatives {:?}",
+            diagnosis.verdict.name(),
+            diagnosis.explanation,
+            diagnosis.before.rms_m * 1e6,
+            diagnosis.after.rms_m * 1e6,
+            diagnosis.effect.as_ref().map(|(n, f)| (n, &f.params)),
+            diagnosis
+                .alternatives
+                .iter()
+                .map(|a| (&a.name, &a.reason))
+                .collect::<Vec<_>>()
+        );
+        println!("seed {seed}: {report}");
+        if diagnosis.verdict != Verdict::Effect {
+            // Never a confident wrong answer: at worst the offsets are tied with an effect the
+            // pose absorbs (measured on seed 13: BIC 46.3 against 40.4).
+            assert_eq!(diagnosis.verdict, Verdict::Ambiguous, "{report}");
+            assert!(diagnosis.explanation.contains("joint_offsets"), "{report}");
+            continue;
+        }
+        found += 1;
+        let (name, fit) = diagnosis.effect.clone().unwrap();
+        assert_eq!(name, "joint_offsets", "{report}");
+        for (parameter, truth) in [
+            ("joint_2_rad", 2e-3),
+            ("joint_3_rad", -3e-3),
+            ("joint_4_rad", 2.5e-3),
+        ] {
+            let (_, value, stderr) = fit.params.iter().find(|(p, _, _)| p == parameter).unwrap();
+            assert!(
+                (value - truth).abs() <= 3.0 * stderr.max(1e-4),
+                "{parameter}: {report}"
+            );
+        }
+        assert!(fit.rms_m < 1.5 * sigma, "{report}");
+        assert!(
+            fit.loo_rms_m < diagnosis.before.loo_rms_m / 2.0,
+            "held out {:.1} um against {:.1} um before: {report}",
+            fit.loo_rms_m * 1e6,
+            diagnosis.before.loo_rms_m * 1e6
+        );
+    }
+    assert!(found >= 2, "found on {found} of 3 sessions");
+}
