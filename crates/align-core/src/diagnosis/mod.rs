@@ -27,7 +27,8 @@
 //! signature at a typical size stays visible beside the pose and the others, then backward
 //! elimination by BIC. A joint-1 offset is a part yaw and drops out; offsets on a UR's three
 //! parallel joints stay together when the data need them. A pair of effects competes with the
-//! single effects on the same terms, but must beat the best single effect by 6 in BIC.
+//! single effects on the same terms, but must beat the best single effect and the pose alone by
+//! 10 in BIC.
 //! Candidates within 6 of the best BIC (a likelihood ratio of 20) make the verdict `ambiguous`,
 //! listing them all and the touches that would separate them; the pose is then left as the
 //! pose-only fit has it. Under `no_effect`, the alternatives list the effects these touches
@@ -143,6 +144,12 @@ pub struct Diagnosis {
 /// applied: 10, "very strong" on Kass and Raftery's scale (a likelihood ratio of 150), since
 /// applying it moves the part by what the touches barely check.
 const ABSORBED_MARGIN_BIC: f64 = 10.0;
+
+/// BIC margin by which a pair must beat every single effect and the pose alone: "very strong"
+/// (10 on Kass and Raftery's scale), since two flexible effects together also fit errors outside
+/// the library (an eccentric encoder was fitted as a TCP shift plus joint offsets, which moved
+/// the part further off).
+const PAIR_MARGIN_BIC: f64 = 10.0;
 
 /// Single effects whose fits rank best are paired with each other, this many at most.
 const PAIRED_SINGLES: usize = 4;
@@ -271,6 +278,9 @@ struct Candidates {
     alternatives: Vec<Alternative>,
     /// The best BIC of the candidates that fit but are mostly a pose change.
     absorbed_best_bic: f64,
+    /// The best pair not applied (name, BIC): if it fits better than the best candidate, that
+    /// one is not the whole story.
+    pair_rival: (String, f64),
 }
 
 /// Every single effect, then pairs of the best-fitting ones.
@@ -282,6 +292,8 @@ fn candidates(
 ) -> Candidates {
     let mut accepted: Vec<Candidate> = Vec::new();
     let mut absorbed: Vec<(Candidate, String)> = Vec::new();
+    // The best-fitting pair that was not decisive enough to apply.
+    let mut pair_rival = (String::new(), f64::INFINITY);
     let mut alternatives = Vec::new();
     let mut fitted_singles: Vec<(Effect, f64)> = Vec::new();
     for effect in Effect::ALL {
@@ -316,13 +328,20 @@ fn candidates(
                         .iter()
                         .filter(|c| c.effects.len() == 1)
                         .map(|c| (c.name(), c.fit.bic))
+                        .chain(std::iter::once((
+                            "the pose alone".to_owned(),
+                            pose_only_bic,
+                        )))
                         .min_by(|a, b| a.1.total_cmp(&b.1))
                         .unwrap_or_else(|| ("the pose alone".to_owned(), pose_only_bic));
-                    if candidate.fit.bic > single_bic - AMBIGUITY_BIC {
+                    if candidate.fit.bic > single_bic - PAIR_MARGIN_BIC {
+                        if candidate.fit.bic < pair_rival.1 {
+                            pair_rival = (candidate.name(), candidate.fit.bic);
+                        }
                         alternatives.push(Alternative {
                             name: candidate.name(),
                             reason: format!(
-                                "BIC {:.1} does not beat {single}'s {single_bic:.1} by {AMBIGUITY_BIC}: the simpler explanation stands",
+                                "BIC {:.1} does not beat {single}'s {single_bic:.1} by {PAIR_MARGIN_BIC}: the simpler explanation stands",
                                 candidate.fit.bic
                             ),
                             fit: Some(candidate.fit),
@@ -367,6 +386,7 @@ fn candidates(
         accepted,
         alternatives,
         absorbed_best_bic,
+        pair_rival,
     }
 }
 
@@ -382,6 +402,7 @@ fn verdict(
         accepted,
         mut alternatives,
         absorbed_best_bic,
+        pair_rival,
     } = found;
     let (statistic, threshold) = chi_square;
     let Some(best) = accepted.first().cloned() else {
@@ -430,7 +451,21 @@ fn verdict(
     let n = problem.touches.len() as f64;
     let after_statistic = best.fit.residuals_m.iter().map(|r| r * r).sum::<f64>() / (sigma * sigma);
     let after_threshold = chi_square_99(n - 6.0 - best.fit.params.len() as f64);
-    let (verdict, explanation, applied) = if absorbed_best_bic < best.fit.bic + AMBIGUITY_BIC {
+    // A pair strongly (by 6) but not very strongly (by 10) better than the best candidate: the
+    // simpler model is not established either.
+    let (verdict, explanation, applied) = if pair_rival.1 < best.fit.bic - AMBIGUITY_BIC {
+        (
+            Verdict::Ambiguous,
+            format!(
+                "{} explains the residual, but {} fits clearly better (BIC {:.1} against {:.1}) without being decisive: the residual may come from outside the library; see the alternatives",
+                best.name(),
+                pair_rival.0,
+                pair_rival.1,
+                best.fit.bic
+            ),
+            false,
+        )
+    } else if absorbed_best_bic < best.fit.bic + AMBIGUITY_BIC {
         (
             Verdict::Ambiguous,
             format!(
