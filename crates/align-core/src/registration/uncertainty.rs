@@ -338,22 +338,15 @@ pub fn pose_uncertainty(
             });
         }
         let in_part = part_from_base * touch.point;
-        let closest = mesh.closest_point(&in_part);
-        if !closest.signed_distance.is_finite() {
+        // The distance's gradient, as the alignment linearises it (its sign does not change
+        // J^T J).
+        let closest = mesh.signed_closest(&in_part, None);
+        if !closest.signed_distance_m.is_finite() {
             return Err(UncertaintyError::NonFinite {
                 what: format!("the distance of touch '{}' from the mesh", touch.id),
             });
         }
-        let normal_part = if closest.on_face {
-            mesh.triangle_normal(closest.triangle)
-        } else {
-            let offset = in_part - closest.point;
-            match offset.try_normalize(1e-12) {
-                Some(unit) if closest.signed_distance < 0.0 => -unit,
-                Some(unit) => unit,
-                None => closest.normal,
-            }
-        };
+        let normal_part = closest.gradient;
         let normal = base_from_part.rotation * normal_part;
         let lever = base_from_part * closest.point - origin;
         let moment = lever.cross(&normal) / radius_m;

@@ -204,6 +204,7 @@ impl<'t> Workspace<'t> {
         let mut solution: Option<LocalSolution> = None;
         let abandon = self.abandon_above;
         let stage_count = stages.len();
+        let last_matching = stages.last().copied();
         for (index, matching) in stages.into_iter().enumerate() {
             let from = solution.as_ref().map_or(*start, |s| s.pose);
             let slide = if index == 0 {
@@ -238,11 +239,14 @@ impl<'t> Workspace<'t> {
             };
             self.iterate(start, Matching::Plain, 0, budget)
         });
-        solution.incoherent = if self.polish {
-            self.correspond(&solution.pose, Matching::Plain);
-            self.incoherent
-        } else {
-            0
+        solution.incoherent = match (self.polish, last_matching) {
+            (false, _) => 0,
+            // The last stage left the plain matching at the final pose.
+            (true, Some(Matching::Plain)) => self.incoherent,
+            (true, _) => {
+                self.correspond(&solution.pose, Matching::Plain);
+                self.incoherent
+            }
         };
         if !(self.polish && guided && point_to_plane) {
             return solution;
