@@ -112,19 +112,12 @@ impl Problem<'_> {
         base_from_flange * flange_from_tcp
     }
 
-    /// Touch `index`'s ball centre in the part frame divided by the part's scale, and the
-    /// reversed approach direction there (the side the probe came from).
-    fn query(
-        &self,
-        index: usize,
-        extras: &Extras,
-        part_from_base: &Isometry3<f64>,
-    ) -> (Point3<f64>, Vector3<f64>) {
+    /// Touch `index`'s ball centre in the part frame divided by the part's scale.
+    fn query(&self, index: usize, extras: &Extras, part_from_base: &Isometry3<f64>) -> Point3<f64> {
         let base_from_tcp = self.base_from_tcp(index, extras);
         let mut in_part = part_from_base * Point3::from(base_from_tcp.translation.vector);
         in_part.coords /= 1.0 + extras.scale_minus_one;
-        let facing = part_from_base.rotation * (base_from_tcp.rotation * -Vector3::z());
-        (in_part, facing)
+        in_part
     }
 
     fn radius(&self, extras: &Extras) -> f64 {
@@ -148,8 +141,8 @@ impl Problem<'_> {
         let values: Vec<f64> = self
             .kept(skip)
             .map(|index| {
-                let (query, facing) = self.query(index, &extras, &part_from_base);
-                let found = self.mesh.signed_closest(&query, Some(&facing));
+                let query = self.query(index, &extras, &part_from_base);
+                let found = self.mesh.signed_closest(&query);
                 found.signed_distance_m * scale - self.radius(&extras)
             })
             .collect();
@@ -171,8 +164,8 @@ impl Problem<'_> {
         let planes: Vec<(Point3<f64>, Vector3<f64>, f64)> = kept
             .iter()
             .map(|&index| {
-                let (query, facing) = self.query(index, &extras, &part_from_base);
-                let found = self.mesh.signed_closest(&query, Some(&facing));
+                let query = self.query(index, &extras, &part_from_base);
+                let found = self.mesh.signed_closest(&query);
                 (query, found.gradient, found.signed_distance_m)
             })
             .collect();
@@ -185,7 +178,7 @@ impl Problem<'_> {
                 kept.iter()
                     .zip(&planes)
                     .map(|(&index, (at, gradient, distance))| {
-                        let (query, _) = self.query(index, &extras, &part_from_base);
+                        let query = self.query(index, &extras, &part_from_base);
                         (distance + gradient.dot(&(query - at))) * scale - self.radius(&extras)
                     }),
             )

@@ -331,15 +331,11 @@ pub struct SignedClosest {
 
 impl Mesh {
     /// The closest point to `query` with a signed distance on every mesh. A closed mesh has an
-    /// inside. On an open one the side is the face normal's, or, when `facing` (the reversed
-    /// direction the probe travelled, unit, mesh frame) is given, the side the probe came from:
-    /// a scanned or exported surface may have its triangles wound either way. Closest to an edge
-    /// or a corner of an open mesh, the distance is unsigned.
-    pub fn signed_closest(
-        &self,
-        query: &Point3<f64>,
-        facing: Option<&Vector3<f64>>,
-    ) -> SignedClosest {
+    /// inside; on an open one the face normal's side is outside, and closest to an edge or a
+    /// corner of an open mesh the distance is unsigned (past an opening's rim either side is
+    /// outside). Flipping the side towards the probe was tried and lost the part: a side contact
+    /// at 90 degrees meets the face with its normal square to the probe, and noise then flips it.
+    pub fn signed_closest(&self, query: &Point3<f64>) -> SignedClosest {
         let found = self.closest_point(query);
         let face_normal = self.triangle_normal(found.triangle);
         let offset = query - found.point;
@@ -351,11 +347,7 @@ impl Mesh {
             // ball touching the rim sideways sits behind the face's plane.
             distance
         } else {
-            let outward = match facing {
-                Some(f) if face_normal.dot(f) < 0.0 => -face_normal,
-                _ => face_normal,
-            };
-            if offset.dot(&outward) < 0.0 {
+            if offset.dot(&face_normal) < 0.0 {
                 -distance
             } else {
                 distance

@@ -340,7 +340,7 @@ pub fn pose_uncertainty(
         let in_part = part_from_base * touch.point;
         // The distance's gradient, as the alignment linearises it (its sign does not change
         // J^T J).
-        let closest = mesh.signed_closest(&in_part, None);
+        let closest = mesh.signed_closest(&in_part);
         if !closest.signed_distance_m.is_finite() {
             return Err(UncertaintyError::NonFinite {
                 what: format!("the distance of touch '{}' from the mesh", touch.id),

@@ -155,9 +155,8 @@ impl<'a> PsaTarget<'a> {
     ///
     /// The ball meets a surface with any point of its front hemisphere, so a contact is coherent
     /// while the face's normal lies within `cone_rad` of `facing` (90 degrees plus a margin for
-    /// stylus and normal errors). On a mesh that is not closed, distances have no inside: the
-    /// side the probe came from is the outside when the approach is known, else the face
-    /// normal's side.
+    /// stylus and normal errors). On a mesh that is not closed, the face normal's side is
+    /// outside ([`Mesh::signed_closest`]).
     pub(super) fn plain_contact(
         &self,
         surface: &Mesh,
@@ -165,11 +164,7 @@ impl<'a> PsaTarget<'a> {
         facing: Option<&Vector3<f64>>,
         cone_rad: f64,
     ) -> Contact {
-        // A face sub-mesh (face hint) keeps the part's orientation; an open part mesh may not
-        // have one, and then the probe says which side the ball was on.
-        let whole_open_part = std::ptr::eq(surface, self.mesh) && !self.mesh.is_watertight();
-        let probe_side = facing.filter(|_| whole_open_part);
-        let found = surface.signed_closest(in_part, probe_side);
+        let found = surface.signed_closest(in_part);
         let coherent = facing.is_none_or(|f| found.face_normal.dot(f) >= cone_rad.cos());
         Contact {
             point: found.point,
