@@ -167,12 +167,18 @@ pub fn run(args: &AlignArgs) -> Result<AlignOutput, BadInput> {
         &options,
     )
     .map_err(|error| BadInput(format!("cannot align: {error}")))?;
-    let mut aligned = output(&result, session.mesh.notes().to_vec());
-    match uncertainty(&session, &result) {
+    Ok(report(&session, &result))
+}
+
+/// The alignment's report with the pose uncertainty (or why there is none): what `ips align
+/// SESSION` prints and the service's `align` replies.
+pub fn report(session: &LoadedSession, result: &PsaResult) -> AlignOutput {
+    let mut aligned = output(result, session.mesh.notes().to_vec());
+    match uncertainty(session, result) {
         Ok(json) => aligned.uncertainty = Some(json),
         Err(why) => aligned.uncertainty_error = Some(why),
     }
-    Ok(aligned)
+    aligned
 }
 
 /// The pose's uncertainty at the aligned pose, with the session's declared noise or, when it
@@ -259,7 +265,7 @@ pub fn uncertainty_json(found: &PoseUncertainty, sigma_source: &'static str) -> 
     }
 }
 
-pub fn output(result: &PsaResult, notes: Vec<String>) -> AlignOutput {
+fn output(result: &PsaResult, notes: Vec<String>) -> AlignOutput {
     AlignOutput {
         pose: PoseJson::from(&result.base_from_part),
         iterations: result.iterations,

@@ -619,7 +619,6 @@ impl Service {
             &options,
         )
         .map_err(|e| format!("cannot align: {e}"))?;
-        serde_json::to_value(crate::align::output(&result, session.mesh.notes().to_vec()))
-            .map_err(|e| e.to_string())
+        serde_json::to_value(crate::align::report(&session, &result)).map_err(|e| e.to_string())
     }
 }
