@@ -177,20 +177,23 @@ fn senders_never_emit_nan() {
 
 #[test]
 fn service_requests_never_carry_nan_and_align_cloud_needs_a_cloud() {
-    let mut request = protocol::service_request("align-cloud");
-    request.body.cloud = Some("scan.ply".to_owned());
-    request.body.delta_m = Some(f64::NAN);
+    let with_delta = |delta_m: f64, start_pose: Option<protocol::Pose>| {
+        protocol::service_request(protocol::ServiceCommand::AlignCloud(
+            protocol::AlignCloudRequest {
+                cloud: "scan.ply".to_owned(),
+                delta_m: Some(delta_m),
+                start_pose,
+                ..Default::default()
+            },
+        ))
+    };
     assert_eq!(
-        to_json(&request).unwrap_err(),
+        to_json(&with_delta(f64::NAN, None)).unwrap_err(),
         ProtocolError::NonFinite(".body.delta_m".to_owned())
     );
-    request.body.delta_m = Some(0.1);
-    request.body.start_pose = Some(protocol::PoseXyzRpy {
-        xyz: [0.6, f64::INFINITY, 0.0],
-        rpy: [0.0; 3],
-    });
+    let infinite = protocol::Pose::new([0.6, f64::INFINITY, 0.0], [0.0; 3]);
     assert_eq!(
-        to_json(&request).unwrap_err(),
+        to_json(&with_delta(0.1, Some(infinite))).unwrap_err(),
         ProtocolError::NonFinite(".body.start_pose.xyz[1]".to_owned())
     );
     let service_schema = schema("service.schema.json");
@@ -198,4 +201,134 @@ fn service_requests_never_carry_nan_and_align_cloud_needs_a_cloud() {
     assert!(!service_schema.is_valid(&without_cloud));
     let negative_delta = serde_json::json!({"header": {"from": "ips", "to": "align", "type": "request"}, "body": {"command": "align-cloud", "cloud": "scan.ply", "delta_m": -0.1}});
     assert!(!service_schema.is_valid(&negative_delta));
+}
+
+#[test]
+fn arrays_in_place_of_objects_are_refused() {
+    let bridge = parse_request(br#"[["ips","ros","instruction"],["stop","hwState"]]"#);
+    assert_eq!(
+        bridge.unwrap_err().to_string(),
+        "the message does not have the expected shape: expected a JSON object, got an array"
+    );
+    let header_array = parse_request(
+        br#"{"header":["ips","ros","instruction"],"body":{"command":"stop","content":"hwState"}}"#,
+    );
+    assert_eq!(
+        header_array.unwrap_err().to_string(),
+        "the message does not have the expected shape: 'header' must be an object, got an array"
+    );
+    let service = protocol::parse_service_request(br#"[["a","b","c"],["reset"]]"#);
+    assert!(
+        service
+            .unwrap_err()
+            .to_string()
+            .contains("expected a JSON object, got an array")
+    );
+}
+
+#[test]
+fn service_requests_are_typed_by_their_command() {
+    let parse = |text: &str| protocol::parse_service_request(text.as_bytes());
+    let envelope = |body: &str| {
+        format!(r#"{{"header":{{"from":"ips","to":"align","type":"request"}},"body":{body}}}"#)
+    };
+    assert_eq!(
+        parse(&envelope(r#"{"command":"reset"}"#)).unwrap().body,
+        protocol::ServiceCommand::Reset
+    );
+    // Unknown fields are ignored, as everywhere in the protocol.
+    assert_eq!(
+        parse(&envelope(r#"{"command":"align","extra":1}"#))
+            .unwrap()
+            .body,
+        protocol::ServiceCommand::Align
+    );
+    assert!(
+        parse(&envelope(r#"{"command":"fly"}"#))
+            .unwrap_err()
+            .to_string()
+            .starts_with("unknown command 'fly' (expected status, start")
+    );
+    assert_eq!(
+        parse(&envelope(r#"{"command":"save"}"#))
+            .unwrap_err()
+            .to_string(),
+        "the message does not have the expected shape: save: missing field `path`"
+    );
+    assert!(
+        parse(&envelope(r#"{"command":7}"#))
+            .unwrap_err()
+            .to_string()
+            .contains("body.command must be a string")
+    );
+    assert!(
+        parse(&envelope(r#"{"command":"remove","ids":"3"}"#))
+            .unwrap_err()
+            .to_string()
+            .contains("remove: invalid type")
+    );
+    assert!(
+        parse("{\"header\": NaN}")
+            .unwrap_err()
+            .to_string()
+            .contains("NaN and Infinity are not JSON numbers")
+    );
+    let huge = envelope(&format!(
+        r#"{{"command":"list","pad":"{}"}}"#,
+        "x".repeat(70_000)
+    ));
+    assert!(
+        parse(&huge)
+            .unwrap_err()
+            .to_string()
+            .contains("exceeds the 65536-byte limit")
+    );
+    for name in [
+        "service_get.json",
+        "service_get_at.json",
+        "service_remove.json",
+        "service_align_cloud.json",
+        "service_diagnose.json",
+    ] {
+        let text = std::fs::read_to_string(root().join("examples").join(name)).unwrap();
+        let request = parse(&text).unwrap_or_else(|error| panic!("{name}: {error}"));
+        assert_eq!(to_json(&request).unwrap(), text.trim_end(), "{name}");
+    }
+}
+
+#[test]
+fn golden_replies_read_as_their_typed_documents() {
+    let reply = |name: &str| -> protocol::ServiceReply {
+        let text = std::fs::read_to_string(root().join("examples").join(name)).unwrap();
+        serde_json::from_str(&text).unwrap()
+    };
+    let diagnosis: protocol::reports::DiagnoseReport = reply("service_reply_diagnose.json")
+        .body
+        .into_data("diagnose")
+        .unwrap();
+    assert_eq!(diagnosis.verdict, "effect");
+    assert_eq!(diagnosis.effect.as_ref().unwrap().name, "probe_radius");
+    let cloud: protocol::reports::CloudReport = reply("service_reply_align_cloud.json")
+        .body
+        .into_data("align-cloud")
+        .unwrap();
+    assert!(cloud.pose.matrix.is_some());
+    let inspection: protocol::Inspection = reply("service_reply_get.json")
+        .body
+        .into_data("get")
+        .unwrap();
+    assert_eq!(inspection.id, "5");
+    let refused = reply("service_reply_stale.json")
+        .body
+        .into_data::<protocol::Inspection>("get");
+    assert!(
+        matches!(refused, Err(protocol::ReplyError::Refused(reason)) if reason.starts_with("latest joint state"))
+    );
+    // A typed document re-serialised through the reply is the golden file's bytes.
+    let text =
+        std::fs::read_to_string(root().join("examples/service_reply_diagnose.json")).unwrap();
+    assert_eq!(
+        to_json(&protocol::service_reply_ok(&diagnosis).unwrap()).unwrap(),
+        text.trim_end()
+    );
 }

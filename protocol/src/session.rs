@@ -1,0 +1,86 @@
+//! The session file (DESIGN.md 6.3, `cobot-align/session@1`): robot, tool, part and the
+//! inspections taken, with paths relative to the file. An inspection is also what the service's
+//! `get` replies and what its journal records.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::pose::Pose;
+
+/// The value of [`SessionFile::format`].
+pub const FORMAT: &str = "cobot-align/session@1";
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SessionFile {
+    pub format: String,
+    /// Optional when every inspection gives its `flange_pose` (DESIGN.md 6.3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<RobotSection>,
+    pub tool: ToolSection,
+    pub part: PartSection,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_sigma: Option<f64>,
+    pub inspections: Vec<Inspection>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RobotSection {
+    pub urdf: String,
+    pub base_link: String,
+    pub tip_link: String,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub package_dirs: BTreeMap<String, String>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ToolSection {
+    pub tcp: Pose,
+    #[serde(default)]
+    pub tip_radius: f64,
+    #[serde(default)]
+    pub mass: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartSection {
+    pub mesh: String,
+    #[serde(default = "unit_scale")]
+    pub mesh_scale: f64,
+    pub nominal_pose: Pose,
+    /// Named planar faces (datum features) inspections may refer to; an extension of 6.3.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faces: Vec<FaceSection>,
+}
+
+fn unit_scale() -> f64 {
+    1.0
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FaceSection {
+    pub name: String,
+    /// Outward normal in the part frame.
+    pub normal: [f64; 3],
+    /// A point of the face's plane in the part frame, m.
+    pub point: [f64; 3],
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Inspection {
+    pub id: String,
+    /// Joint positions, rad (or m for prismatic joints).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub q: Option<Vec<f64>>,
+    /// `base_from_flange` as the controller reports it instead of joints: x, y, z (m) and a
+    /// rotation vector (rad), as a UR's `actual_TCP_pose` with a zero TCP offset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flange_pose: Option<[f64; 6]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub qd: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stamp: Option<f64>,
+    /// The part face this touch was meant for (a face hint); an extension of 6.3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face: Option<String>,
+}
