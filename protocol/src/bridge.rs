@@ -20,6 +20,13 @@ impl RobotSide {
             RobotSide::IiwaDrive => "IiwaDrive",
         }
     }
+
+    /// The side a header's `from` names, if it is one.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [RobotSide::Ros, RobotSide::IiwaDrive]
+            .into_iter()
+            .find(|side| side.name() == name)
+    }
 }
 
 /// Body of instruction requests and acks.

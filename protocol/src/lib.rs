@@ -25,6 +25,7 @@ pub mod pose;
 pub mod reports;
 pub mod service;
 pub mod session;
+pub mod sim;
 
 pub use bridge::{
     Command, HwState, HwStateBody, Instruction, InstructionBody, Request, RobotSide, Status,

@@ -32,7 +32,7 @@ pub enum ServiceCommand {
     /// Point Set Alignment of the session's part to the inspections.
     Align,
     /// Point Cloud Alignment of a scanner cloud file.
-    AlignCloud(AlignCloudRequest),
+    AlignCloud(Box<AlignCloudRequest>),
     Diagnose,
     /// Write the session (robot, tool, part, inspections) to `path`.
     Save(PathRequest),

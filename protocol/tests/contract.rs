@@ -178,14 +178,14 @@ fn senders_never_emit_nan() {
 #[test]
 fn service_requests_never_carry_nan_and_align_cloud_needs_a_cloud() {
     let with_delta = |delta_m: f64, start_pose: Option<protocol::Pose>| {
-        protocol::service_request(protocol::ServiceCommand::AlignCloud(
+        protocol::service_request(protocol::ServiceCommand::AlignCloud(Box::new(
             protocol::AlignCloudRequest {
                 cloud: "scan.ply".to_owned(),
                 delta_m: Some(delta_m),
                 start_pose,
                 ..Default::default()
             },
-        ))
+        )))
     };
     assert_eq!(
         to_json(&with_delta(f64::NAN, None)).unwrap_err(),

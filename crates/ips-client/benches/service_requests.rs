@@ -17,7 +17,8 @@ use std::time::Instant;
 
 use align_core::pose::isometry_from_xyz_rpy;
 use align_core::trials::probing::{step_block_diagnosis_touches, tilted_joint_targets};
-use ips_client::session::{Inspection, LoadedSession, SessionFile};
+use align_service::session::LoadedSession;
+use protocol::session::{Inspection, SessionFile};
 use serde_json::{Value, json};
 
 fn example(file: &str) -> PathBuf {
@@ -181,7 +182,7 @@ fn main() {
     let bridge_pub = socket(&context, zmq::PUB);
     bridge_pub.bind("tcp://127.0.0.1:*").expect("bind");
     let endpoint = |s: &zmq::Socket| s.get_last_endpoint().expect("endpoint").expect("utf-8");
-    let service = ips_client::serve::start(&ips_client::serve::ServeConfig {
+    let service = align_service::server::start(&align_service::server::Config {
         session: sessions[0].1.clone(),
         journal: folder.join("inspections.journal"),
         rep: "tcp://127.0.0.1:*".to_owned(),

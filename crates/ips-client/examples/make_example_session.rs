@@ -12,10 +12,9 @@ use align_core::io::{TriangleSoup, write_stl_binary};
 use align_core::pose::{isometry_from_xyz_rpy, xyz_rpy};
 use align_core::robots::ShippedRobot;
 use align_core::trials::parts::step_block;
-use ips_client::session::{
-    FORMAT, Inspection, PartSection, PoseSection, RobotSection, SessionFile, ToolSection,
-};
 use nalgebra::{Isometry3, Point3};
+use protocol::Pose;
+use protocol::session::{FORMAT, Inspection, PartSection, RobotSection, SessionFile, ToolSection};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/step_block_ur10");
@@ -54,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     let pose = |p: &Isometry3<f64>| {
         let (xyz, rpy) = xyz_rpy(p);
-        PoseSection { xyz, rpy }
+        Pose::new(xyz, rpy)
     };
     let session = SessionFile {
         format: FORMAT.to_owned(),

@@ -1,28 +1,32 @@
-//! The IPS side of cobot-align: the `ips` command-line tool. Each subcommand is a module with a
-//! `run` function returning its output; `bin/ips.rs` only parses arguments and maps errors to exit
-//! codes (0 success, 2 bad input with a one-line reason on stderr).
+//! The IPS side of cobot-align: the `ips` command-line tool. Each subcommand is a file under
+//! [`commands`] owning its arguments, its run and its output; `bin/ips.rs` only parses
+//! arguments, prints and maps errors to exit codes. The service itself, the sessions and the
+//! alignment jobs are the `align-service` library.
 
-pub mod align;
-pub mod align_cloud;
-pub mod align_robot;
 pub mod cli;
 pub mod client;
-pub mod demo;
-pub mod diagnose;
-pub mod fk;
-pub mod robot_trials;
-pub mod serve;
-pub mod session;
-pub mod trials;
+pub mod commands;
 
-/// An error the user caused (bad arguments, a missing or malformed file): exit code 2.
+pub use align_service::BadInput;
+
+/// Why a command failed, and so its exit code.
 #[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct BadInput(pub String);
+pub enum CliError {
+    /// The user's to fix (arguments, files, a request the service refused): exit code 2.
+    #[error(transparent)]
+    BadInput(#[from] BadInput),
+    /// The run failed (no reply in time, a child that died, a file that cannot be written):
+    /// exit code 1.
+    #[error("{0}")]
+    Failure(String),
+}
 
-impl BadInput {
-    pub fn new(message: impl std::fmt::Display) -> Self {
-        Self(message.to_string())
+impl CliError {
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            CliError::BadInput(_) => 2,
+            CliError::Failure(_) => 1,
+        }
     }
 }
 
@@ -63,4 +67,11 @@ pub fn parse_number_list(text: &str, what: &str) -> Result<Vec<f64>, BadInput> {
 pub fn display_round(value: f64, decimals: i32) -> f64 {
     let scale = 10f64.powi(decimals);
     (value * scale).round() / scale + 0.0
+}
+
+/// One JSON document on one line, as every `--json` prints.
+pub fn json_line(value: &impl serde::Serialize) -> Result<String, CliError> {
+    serde_json::to_string(value)
+        .map(|text| text + "\n")
+        .map_err(|error| CliError::Failure(format!("cannot encode the result as JSON: {error}")))
 }

@@ -12,7 +12,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use ips_client::serve::{ServeConfig, ServeHandle};
+use align_service::server::{Config as ServeConfig, Handle as ServeHandle};
 use serde_json::{Value, json};
 
 fn example(file: &str) -> PathBuf {
@@ -63,7 +63,7 @@ impl Fixture {
         let _ = std::fs::remove_dir_all(&folder);
         std::fs::create_dir_all(&folder).unwrap();
         std::fs::write(folder.join("session.json"), session.to_string()).unwrap();
-        let service = ips_client::serve::start(&ServeConfig {
+        let service = align_service::server::start(&ServeConfig {
             session: folder.join("session.json"),
             journal: folder.join("inspections.journal"),
             rep: "tcp://127.0.0.1:*".to_owned(),

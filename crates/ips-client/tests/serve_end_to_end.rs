@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use align_core::robots::ShippedRobot;
-use ips_client::serve::{ServeConfig, ServeHandle};
+use align_service::server::{Config as ServeConfig, Handle as ServeHandle};
 use serde_json::{Value, json};
 
 fn example(file: &str) -> PathBuf {
@@ -62,7 +62,7 @@ fn ips(args: &[&str]) -> Value {
 }
 
 fn serve(config: &ServeConfig) -> ServeHandle {
-    ips_client::serve::start(config).unwrap()
+    align_service::server::start(config).unwrap()
 }
 
 #[test]

@@ -17,53 +17,18 @@
 use align_core::kinematics::{Chain, PointMass};
 use align_core::rng::SplitMix64;
 use nalgebra::Point3;
-use serde::Deserialize;
 
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-pub(crate) struct CyclicEncoder {
-    /// 0-based joint index.
-    joint: usize,
-    amplitude_rad: f64,
-    cycles_per_turn: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub(crate) struct Payload {
-    mass_kg: f64,
-    #[serde(default)]
-    com_in_flange: [f64; 3],
-}
-
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct Effects {
-    #[serde(default)]
-    joint_offsets: Option<Vec<f64>>,
-    #[serde(default)]
-    compliance_rad_per_nm: Option<Vec<f64>>,
-    #[serde(default)]
-    payload: Option<Payload>,
-    #[serde(default)]
-    cyclic_encoder: Option<CyclicEncoder>,
-    #[serde(default)]
-    noise_sigma_rad: Option<f64>,
-    #[serde(default)]
-    trigger_latency_s: Option<f64>,
-}
+/// The effects in force: the `effects` request's fields, checked.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Effects(protocol::sim::Effects);
 
 fn finite(values: &[f64]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 
 impl Effects {
-    /// Parses and checks an `effects` request for a robot with `dof` joints.
-    pub(crate) fn from_request(request: &serde_json::Value, dof: usize) -> Result<Self, String> {
-        let mut fields = request.clone();
-        if let Some(object) = fields.as_object_mut() {
-            object.remove("command");
-        }
-        let effects: Effects =
-            serde_json::from_value(fields).map_err(|error| format!("bad effects: {error}"))?;
+    /// Checks an `effects` request for a robot with `dof` joints.
+    pub(crate) fn checked(effects: protocol::sim::Effects, dof: usize) -> Result<Self, String> {
         let per_joint = [
             ("joint_offsets", &effects.joint_offsets, 0.1),
             (
@@ -117,24 +82,25 @@ impl Effects {
         {
             return Err("effects: trigger_latency_s must be within 0-0.5 s".to_owned());
         }
-        Ok(effects)
+        Ok(Self(effects))
     }
 
     /// How much later than its time stamp a sample's joints are, s.
     pub(crate) fn latency_s(&self) -> f64 {
-        self.trigger_latency_s.unwrap_or(0.0)
+        self.0.trigger_latency_s.unwrap_or(0.0)
     }
 
     /// What the encoders report for the true angles `q_true` at controller time `time_s`.
     pub(crate) fn reported(&self, chain: &Chain, q_true: &[f64], time_s: f64) -> Vec<f64> {
+        let effects = &self.0;
         let mut q: Vec<f64> = q_true.to_vec();
-        if let Some(offsets) = &self.joint_offsets {
+        if let Some(offsets) = &effects.joint_offsets {
             for (value, offset) in q.iter_mut().zip(offsets) {
                 *value += offset;
             }
         }
-        if let Some(compliance) = &self.compliance_rad_per_nm {
-            let payload = self.payload.as_ref().map(|p| PointMass {
+        if let Some(compliance) = &effects.compliance_rad_per_nm {
+            let payload = effects.payload.as_ref().map(|p| PointMass {
                 mass_kg: p.mass_kg,
                 com_in_tip: Point3::from(p.com_in_flange),
             });
@@ -144,11 +110,11 @@ impl Effects {
                 *value -= c * tau;
             }
         }
-        if let Some(cyclic) = &self.cyclic_encoder {
+        if let Some(cyclic) = &effects.cyclic_encoder {
             q[cyclic.joint] +=
                 cyclic.amplitude_rad * (cyclic.cycles_per_turn * q_true[cyclic.joint]).sin();
         }
-        if let Some(sigma) = self.noise_sigma_rad.filter(|s| *s > 0.0) {
+        if let Some(sigma) = effects.noise_sigma_rad.filter(|s| *s > 0.0) {
             let mut rng = SplitMix64::new(time_s.to_bits());
             for value in &mut q {
                 *value += sigma * rng.gaussian();
@@ -163,9 +129,14 @@ mod tests {
     use super::*;
     use serde_json::json;
 
+    fn from_request(request: serde_json::Value, dof: usize) -> Result<Effects, String> {
+        let effects = serde_json::from_value(request).map_err(|error| error.to_string())?;
+        Effects::checked(effects, dof)
+    }
+
     #[test]
     fn requests_are_checked() {
-        assert!(Effects::from_request(&json!({"command": "effects"}), 6).is_ok());
+        assert!(from_request(json!({}), 6).is_ok());
         let bad = [
             json!({"joint_offsets": vec![0.0; 5]}),
             json!({"joint_offsets": [0.2, 0, 0, 0, 0, 0]}),
@@ -175,7 +146,7 @@ mod tests {
             json!({"gravity": 1}),
         ];
         for request in bad {
-            assert!(Effects::from_request(&request, 6).is_err(), "{request}");
+            assert!(from_request(request.clone(), 6).is_err(), "{request}");
         }
     }
 
@@ -184,7 +155,7 @@ mod tests {
         let chain = align_core::robots::ShippedRobot::Ur10
             .chain()
             .expect("model");
-        let effects = Effects::from_request(&json!({"noise_sigma_rad": 1e-4}), 6).expect("valid");
+        let effects = from_request(json!({"noise_sigma_rad": 1e-4}), 6).expect("valid");
         let q = align_core::robots::ShippedRobot::Ur10.home();
         let a = effects.reported(&chain, &q, 1.25);
         assert_eq!(a, effects.reported(&chain, &q, 1.25));

@@ -41,8 +41,9 @@ use std::time::{Duration, Instant};
 use align_core::kinematics::Chain;
 use align_core::robots::ShippedRobot;
 pub use motion::Motion;
+use motion::Trajectory;
 use nalgebra::{DVector, Isometry3, Vector3};
-use serde_json::{Value, json};
+use protocol::sim::{self, SimCommand};
 
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -444,104 +445,111 @@ fn control_loop(socket: zmq::Socket, shared: Arc<Shared>, robot: ShippedRobot) {
             Err(_) => break,
         };
         let reply = handle_control(&request, &shared, robot);
-        if socket.send(reply.to_string().as_bytes(), 0).is_err() {
+        if socket.send(reply.as_bytes(), 0).is_err() {
             break;
         }
     }
 }
 
-fn failure(reason: impl Into<String>) -> Value {
-    json!({"ok": false, "reason": reason.into()})
-}
-
-fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> Value {
-    let Ok(request) = serde_json::from_slice::<Value>(request) else {
-        return failure("the request is not JSON");
+fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> String {
+    let command = match sim::parse_command(request) {
+        Ok(command) => command,
+        Err(reason) => return sim::reply_error(&reason),
     };
-    match request["command"].as_str() {
-        Some("status") => {
-            let fri = shared
-                .fri
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .as_ref()
-                .map(|link| {
-                    json!({
-                        "session_state": link.session_state.name(),
-                        "quality": link.quality.name(),
-                        "sequence": link.sequence,
-                        "timely_answers": link.timely_answers,
-                        "local_address": link.local_address,
-                    })
-                });
-            let time_s = shared.now_s();
-            let at_rest = shared
-                .motion
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .at_rest(time_s);
-            let probe = shared
-                .probe
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .as_ref()
-                .map(|schedule| schedule.report(time_s, at_rest));
-            json!({
-                "ok": true,
-                "time": time_s,
-                "clients": shared.clients.load(Ordering::Relaxed),
-                "paused": shared.paused.load(Ordering::Relaxed),
-                "robot": robot.name(),
-                "at_rest": at_rest,
-                "fri": fri,
-                "probe": probe,
+    let done = || sim::reply_ok(&sim::Done {});
+    match command {
+        SimCommand::Status => sim::reply_ok(&status(shared, robot)),
+        SimCommand::Truth => {
+            let sample = shared.sample();
+            sim::reply_ok(&sim::Truth {
+                q: sample.true_q,
+                qd: sample.qd,
+                reported_q: sample.q,
+                time: sample.time_s,
             })
         }
-        Some("truth") => {
-            let sample = shared.sample();
-            json!({"ok": true, "time": sample.time_s, "q": sample.true_q, "qd": sample.qd, "reported_q": sample.q})
-        }
-        Some("truth_at") => match request["time"].as_f64() {
-            Some(time) if time.is_finite() => {
-                let sample = shared.sample_at(time);
-                json!({"ok": true, "time": time, "q": sample.true_q, "qd": sample.qd, "reported_q": sample.q})
+        SimCommand::TruthAt { time } => {
+            if !time.is_finite() {
+                return sim::reply_error("truth_at needs a finite 'time' in s");
             }
-            _ => failure("truth_at needs a finite 'time' in s"),
+            let sample = shared.sample_at(time);
+            sim::reply_ok(&sim::Truth {
+                q: sample.true_q,
+                qd: sample.qd,
+                reported_q: sample.q,
+                time,
+            })
+        }
+        SimCommand::Motion { motion } => match motion.check(&shared.limits) {
+            Ok(()) => {
+                shared.set_motion(motion);
+                // A scripted motion replaces any probe run.
+                *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = None;
+                done()
+            }
+            Err(reason) => sim::reply_error(&reason),
         },
-        Some("motion") => match serde_json::from_value::<Motion>(request["motion"].clone()) {
-            Ok(motion) => match motion.check(&shared.limits) {
-                Ok(()) => {
-                    shared.set_motion(motion);
-                    // A scripted motion replaces any probe run.
-                    *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = None;
-                    json!({"ok": true})
+        SimCommand::Effects(effects) => {
+            match effects::Effects::checked(effects, shared.limits.len()) {
+                Ok(effects) => {
+                    *shared.effects.lock().unwrap_or_else(|p| p.into_inner()) = effects;
+                    done()
                 }
-                Err(reason) => failure(reason),
-            },
-            Err(error) => failure(format!("bad motion: {error}")),
-        },
-        Some("effects") => match effects::Effects::from_request(&request, shared.limits.len()) {
-            Ok(effects) => {
-                *shared.effects.lock().unwrap_or_else(|p| p.into_inner()) = effects;
-                json!({"ok": true})
+                Err(reason) => sim::reply_error(&reason),
             }
-            Err(reason) => failure(reason),
+        }
+        SimCommand::Probe(request) => match probing::start(&request, shared) {
+            Ok(plan) => sim::reply_ok(&plan),
+            Err(reason) => sim::reply_error(&reason),
         },
-        Some("probe") => probing::start(&request, shared).unwrap_or_else(failure),
-        Some("pause") => {
+        SimCommand::Pause => {
             shared.paused.store(true, Ordering::Relaxed);
-            json!({"ok": true})
+            done()
         }
-        Some("resume") => {
+        SimCommand::Resume => {
             shared.paused.store(false, Ordering::Relaxed);
-            json!({"ok": true})
+            done()
         }
-        Some("drop") => {
+        SimCommand::Drop => {
             shared.drop_generation.fetch_add(1, Ordering::Relaxed);
-            json!({"ok": true})
+            done()
         }
-        Some(other) => failure(format!("unknown command '{other}'")),
-        None => failure("the request has no 'command'"),
+    }
+}
+
+fn status(shared: &Shared, robot: ShippedRobot) -> sim::SimStatus {
+    let fri = shared
+        .fri
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .as_ref()
+        .map(|link| sim::FriLink {
+            local_address: link.local_address.clone(),
+            quality: link.quality.name().to_owned(),
+            sequence: u64::from(link.sequence),
+            session_state: link.session_state.name().to_owned(),
+            timely_answers: link.timely_answers,
+        });
+    let time_s = shared.now_s();
+    let at_rest = shared
+        .motion
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .at_rest(time_s);
+    let probe = shared
+        .probe
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .as_ref()
+        .map(|schedule| schedule.report(time_s, at_rest));
+    sim::SimStatus {
+        at_rest,
+        clients: shared.clients.load(Ordering::Relaxed),
+        fri,
+        paused: shared.paused.load(Ordering::Relaxed),
+        probe,
+        robot: robot.name().to_owned(),
+        time: time_s,
     }
 }
 

@@ -1,35 +1,7 @@
 //! Scripted joint motion: a deterministic function of controller time, so the ground truth at
 //! any sample time can be recomputed exactly by tests.
 
-use serde::{Deserialize, Serialize};
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Motion {
-    /// Stand still at `q` (rad).
-    Hold { q: Vec<f64> },
-    /// q_i(t) = centre_i + amplitude_i sin(2 pi t / period_s): smooth, within limits when the
-    /// centre +- amplitude is.
-    Sine {
-        centre: Vec<f64>,
-        amplitude: Vec<f64>,
-        period_s: f64,
-    },
-    /// Joint-space moves through `waypoints` (controller times, increasing), each segment a
-    /// smooth start-stop blend q_a + (q_b - q_a) (1 - cos(pi s)) / 2; held before the first and
-    /// after the last. Two equal waypoints make a dwell.
-    Path { waypoints: Vec<Waypoint> },
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Waypoint {
-    pub time_s: f64,
-    pub q: Vec<f64>,
-    /// The segment that ends here runs at constant joint speed instead of the start-stop blend
-    /// (a probe passing through contact on the fly).
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub linear: bool,
-}
+pub use protocol::sim::{Motion, Waypoint};
 
 /// Position, velocity and acceleration fractions of a segment at phase `s`: the start-stop blend
 /// (1 - cos(pi s)) / 2, or constant speed for a linear segment.
@@ -64,8 +36,23 @@ fn held(waypoints: &[Waypoint], t_s: f64) -> Vec<f64> {
         .unwrap_or_default()
 }
 
-impl Motion {
-    pub fn dof(&self) -> usize {
+/// What sim-robot computes of a [`Motion`] (the wire type lives in the protocol crate).
+pub trait Trajectory {
+    fn dof(&self) -> usize;
+    /// Joint positions at controller time `t_s`, rad.
+    fn position(&self, t_s: f64) -> Vec<f64>;
+    /// True when no joint moves at `t_s`.
+    fn at_rest(&self, t_s: f64) -> bool;
+    /// Joint velocities at `t_s`, rad/s.
+    fn velocity(&self, t_s: f64) -> Vec<f64>;
+    /// Joint accelerations at `t_s`, rad/s^2.
+    fn acceleration(&self, t_s: f64) -> Vec<f64>;
+    /// Refuses a motion for another joint count, outside `limits` or with bad numbers.
+    fn check(&self, limits: &[(f64, f64)]) -> Result<(), String>;
+}
+
+impl Trajectory for Motion {
+    fn dof(&self) -> usize {
         match self {
             Motion::Hold { q } => q.len(),
             Motion::Sine { centre, .. } => centre.len(),
@@ -74,7 +61,7 @@ impl Motion {
     }
 
     /// Joint positions at controller time `t_s`, rad.
-    pub fn position(&self, t_s: f64) -> Vec<f64> {
+    fn position(&self, t_s: f64) -> Vec<f64> {
         match self {
             Motion::Hold { q } => q.clone(),
             Motion::Sine {
@@ -103,12 +90,12 @@ impl Motion {
     }
 
     /// Whether the joints stand still at `t_s`.
-    pub fn at_rest(&self, t_s: f64) -> bool {
+    fn at_rest(&self, t_s: f64) -> bool {
         self.velocity(t_s).iter().all(|v| *v == 0.0)
     }
 
     /// Joint velocities at controller time `t_s`, rad/s.
-    pub fn velocity(&self, t_s: f64) -> Vec<f64> {
+    fn velocity(&self, t_s: f64) -> Vec<f64> {
         match self {
             Motion::Hold { q } => vec![0.0; q.len()],
             Motion::Sine {
@@ -136,7 +123,7 @@ impl Motion {
     }
 
     /// Joint accelerations at controller time `t_s`, rad/s^2.
-    pub fn acceleration(&self, t_s: f64) -> Vec<f64> {
+    fn acceleration(&self, t_s: f64) -> Vec<f64> {
         match self {
             Motion::Hold { q } => vec![0.0; q.len()],
             Motion::Sine {
@@ -164,7 +151,7 @@ impl Motion {
     }
 
     /// Checks the motion fits a robot with these position limits.
-    pub fn check(&self, limits: &[(f64, f64)]) -> Result<(), String> {
+    fn check(&self, limits: &[(f64, f64)]) -> Result<(), String> {
         if self.dof() != limits.len() {
             return Err(format!(
                 "the robot has {} joints, the motion {}",

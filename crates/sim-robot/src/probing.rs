@@ -5,16 +5,13 @@
 //! The control socket's status says which touch is in contact and whether the arm is at rest.
 //! Moves between touches are joint-space blends with no collision check: a simulator only.
 
-use std::path::PathBuf;
-
 use align_core::geometry::Mesh;
 use align_core::pose::isometry_from_xyz_rpy;
 use align_core::trials::planning::{PlanOptions, plan_touches};
-use serde::Deserialize;
-use serde_json::{Value, json};
+use protocol::sim::{Contact, ProbePlan, ProbeRequest, ProbeStatus};
 
 use crate::Shared;
-use crate::motion::{Motion, Waypoint};
+use crate::motion::{Motion, Trajectory, Waypoint};
 
 /// Joint speed of the moves between touches, rad/s (the largest joint move sets the time).
 const TRAVEL_SPEED_RAD_S: f64 = 2.0;
@@ -22,65 +19,8 @@ const SHORTEST_MOVE_S: f64 = 0.2;
 /// The last bit into contact and back out, s.
 const CONTACT_MOVE_S: f64 = 0.25;
 
-#[derive(Debug, Clone, Deserialize)]
-pub(crate) struct PoseSpec {
-    xyz: [f64; 3],
-    rpy: [f64; 3],
-}
-
-/// The `probe` request: `{"command": "probe", "mesh": PATH, "mesh_scale": 0.001,
-/// "base_from_part": {"xyz","rpy"}, "tcp": {"xyz","rpy"}, "tip_radius": m, "part_scale": 1.0,
-/// "touches": 9, "max_tilt_rad": 0.6, "dwell_s": 0.5, "vary_tilt": false}`.
-#[derive(Debug, Clone, Deserialize)]
-pub(crate) struct ProbeRequest {
-    mesh: PathBuf,
-    #[serde(default = "one")]
-    mesh_scale: f64,
-    base_from_part: PoseSpec,
-    tcp: PoseSpec,
-    tip_radius: f64,
-    #[serde(default = "one")]
-    part_scale: f64,
-    #[serde(default = "nine")]
-    touches: usize,
-    #[serde(default = "default_tilt")]
-    max_tilt_rad: f64,
-    #[serde(default = "default_dwell")]
-    dwell_s: f64,
-    /// Vary the probe tilt from touch to touch (see `PlanOptions::vary_tilt`).
-    #[serde(default)]
-    vary_tilt: bool,
-    /// Touch on the fly instead of dwelling: pass through each contact at these speeds (m/s,
-    /// used in turn, each at most 5 mm/s) along the probe axis. The contact's time is the
-    /// trigger's time stamp a touch-trigger probe would give.
-    #[serde(default)]
-    on_the_fly_speeds_m_s: Option<Vec<f64>>,
-}
-
-fn one() -> f64 {
-    1.0
-}
-fn nine() -> usize {
-    9
-}
-fn default_tilt() -> f64 {
-    0.6
-}
-fn default_dwell() -> f64 {
-    0.5
-}
-
 /// How far before and past the contact an on-the-fly touch moves at constant speed, m.
 const PASS_THROUGH_M: f64 = 0.001;
-
-/// One touch's time in contact, controller time, s: dwelling from `from_s` to `until_s`, or
-/// passing through between them on the fly; `at_s` is when the ball is exactly on the surface.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Contact {
-    pub(crate) from_s: f64,
-    pub(crate) until_s: f64,
-    pub(crate) at_s: f64,
-}
 
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Schedule {
@@ -113,17 +53,17 @@ fn through_contact(
 
 impl Schedule {
     /// The status the control socket reports at `time_s`.
-    pub(crate) fn report(&self, time_s: f64, at_rest: bool) -> Value {
+    pub(crate) fn report(&self, time_s: f64, at_rest: bool) -> ProbeStatus {
         let active = self
             .contacts
             .iter()
             .position(|contact| (contact.from_s..contact.until_s).contains(&time_s));
-        json!({
-            "touches": self.contacts.len(),
-            "active_touch": active,
-            "at_rest": at_rest,
-            "done": time_s >= self.end_s,
-        })
+        ProbeStatus {
+            active_touch: active,
+            at_rest,
+            done: time_s >= self.end_s,
+            touches: self.contacts.len(),
+        }
     }
 }
 
@@ -131,10 +71,8 @@ fn finite(values: &[f64]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 
-/// Plans the touches and starts the path; returns the reply.
-pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
-    let request: ProbeRequest = serde_json::from_value(request.clone())
-        .map_err(|error| format!("bad probe request: {error}"))?;
+/// Plans the touches and starts the path; returns the plan.
+pub(crate) fn start(request: &ProbeRequest, shared: &Shared) -> Result<ProbePlan, String> {
     let numbers = [
         request.mesh_scale,
         request.tip_radius,
@@ -143,10 +81,8 @@ pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
         request.dwell_s,
     ];
     if !finite(&numbers)
-        || !finite(&request.base_from_part.xyz)
-        || !finite(&request.base_from_part.rpy)
-        || !finite(&request.tcp.xyz)
-        || !finite(&request.tcp.rpy)
+        || request.base_from_part.first_non_finite().is_some()
+        || request.tcp.first_non_finite().is_some()
     {
         return Err("probe: every number must be finite".to_owned());
     }
@@ -258,13 +194,12 @@ pub(crate) fn start(request: &Value, shared: &Shared) -> Result<Value, String> {
     motion.check(&shared.limits)?;
     let end_s = time_s;
     shared.set_motion(motion);
-    let reply = json!({
-        "ok": true,
-        "touches": plan.len(),
-        "end_s": end_s,
-        "contacts": contacts.iter().map(|c| json!({"from_s": c.from_s, "until_s": c.until_s, "at_s": c.at_s})).collect::<Vec<_>>(),
-        "tilts_rad": plan.iter().map(|t| t.tilt_rad).collect::<Vec<_>>(),
-    });
+    let reply = ProbePlan {
+        contacts: contacts.clone(),
+        end_s,
+        tilts_rad: plan.iter().map(|t| t.tilt_rad).collect(),
+        touches: plan.len(),
+    };
     *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = Some(Schedule { contacts, end_s });
     Ok(reply)
 }

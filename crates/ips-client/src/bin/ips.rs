@@ -1,8 +1,14 @@
+//! `ips`: parses the arguments, runs the command, prints its output and maps its error to the
+//! exit code (0 success, 2 bad input, 1 failure at run time; see the README).
+
 use std::process::ExitCode;
 
 use clap::Parser;
-use ips_client::BadInput;
 use ips_client::cli::{Cli, Command};
+use ips_client::commands::{
+    align, align_cloud, align_robot, demo, diagnose, fk, serve, service, trials,
+};
+use ips_client::{BadInput, CliError};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -12,151 +18,37 @@ fn main() -> ExitCode {
             let _ = error.print();
             return ExitCode::SUCCESS;
         }
-        Err(error) => return bad_input(&BadInput(one_line(&error.to_string()))),
+        Err(error) => return fail(&BadInput(one_line(&error.to_string())).into()),
     };
     match run(cli.command) {
         Ok(output) => {
             print!("{output}");
             ExitCode::SUCCESS
         }
-        Err(error) => bad_input(&error),
+        Err(error) => fail(&error),
     }
 }
 
-fn run(command: Command) -> Result<String, BadInput> {
+fn run(command: Command) -> Result<String, CliError> {
     match command {
-        Command::Fk(args) => {
-            let output = ips_client::fk::run(&args)?;
-            for warning in &output.warnings {
-                eprintln!("warning: {warning}");
-            }
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_text()
-            })
-        }
-        Command::Align(args) if args.service.is_some() => {
-            let endpoint = args.service.as_deref().unwrap_or_default();
-            let data =
-                ips_client::client::request_data(endpoint, &protocol::service_request("align"))?;
-            Ok(if args.json {
-                json_line(&data)?
-            } else {
-                ips_client::client::align_text(&data)
-            })
-        }
-        Command::Align(args) => {
-            let output = ips_client::align::run(&args)?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_text()
-            })
-        }
-        Command::AlignCloud(args) => {
-            let output = ips_client::align_cloud::run(&args)?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_text()
-            })
-        }
-        Command::AlignRobot(args) => {
-            let output = ips_client::align_robot::run(&args)?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_text()
-            })
-        }
-        Command::Serve(args) => serve(&args),
-        Command::Start(args) => ips_client::client::call("start", Vec::new(), &args),
-        Command::Stop(args) => ips_client::client::call("stop", Vec::new(), &args),
-        Command::Get(args) => ips_client::client::get(args.at, &args.service),
-        Command::List(args) => ips_client::client::call("list", Vec::new(), &args),
-        Command::Reset(args) => ips_client::client::call("reset", Vec::new(), &args),
-        Command::Status(args) => ips_client::client::call("status", Vec::new(), &args),
-        Command::Save(args) => ips_client::client::call_with_path(
-            "save",
-            Vec::new(),
-            Some(args.path.clone()),
-            &args.service,
-        ),
-        Command::Load(args) => ips_client::client::call_with_path(
-            "load",
-            Vec::new(),
-            Some(args.path.clone()),
-            &args.service,
-        ),
-        Command::Remove(args) => {
-            ips_client::client::call("remove", args.ids.clone(), &args.service)
-        }
-        Command::Diagnose(args) => {
-            let output = ips_client::diagnose::run(&args)?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_text()
-            })
-        }
-        Command::Demo(args) => {
-            let output = ips_client::demo::run(&args, |line| eprintln!("{line}"))?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_text()
-            })
-        }
-        Command::Trials(args) if args.robot.is_some() || args.urdf.is_some() => {
-            let output = ips_client::robot_trials::run(&args, |line| eprintln!("{line}"))?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_markdown()
-            })
-        }
-        Command::Trials(args) => {
-            let output = ips_client::trials::run(&args, |line| eprintln!("{line}"))?;
-            Ok(if args.json {
-                json_line(&output)?
-            } else {
-                output.to_markdown()
-            })
-        }
+        Command::Fk(args) => fk::command(&args),
+        Command::Trials(args) => trials::command(&args),
+        Command::Align(args) => align::run(&args),
+        Command::AlignCloud(args) => align_cloud::run(&args),
+        Command::AlignRobot(args) => align_robot::command(&args),
+        Command::Serve(args) => serve::run(&args),
+        Command::Start(args) => service::start(&args),
+        Command::Stop(args) => service::stop(&args),
+        Command::Get(args) => service::get(&args),
+        Command::List(args) => service::list(&args),
+        Command::Remove(args) => service::remove(&args),
+        Command::Reset(args) => service::reset(&args),
+        Command::Save(args) => service::save(&args),
+        Command::Load(args) => service::load(&args),
+        Command::Status(args) => service::status(&args),
+        Command::Demo(args) => demo::run(&args),
+        Command::Diagnose(args) => diagnose::run(&args),
     }
-}
-
-fn serve(args: &ips_client::cli::ServeArgs) -> Result<String, BadInput> {
-    use std::sync::Arc;
-    use std::sync::atomic::{AtomicBool, Ordering};
-    let config = ips_client::serve::ServeConfig {
-        session: args.session.clone(),
-        journal: args.journal.clone(),
-        rep: args.rep.clone(),
-        bridge_rep: args.bridge_rep.clone(),
-        bridge_pub: args.bridge_pub.clone(),
-        max_sample_age_s: args.max_sample_age,
-        max_tool_speed_m_s: args.max_tool_speed,
-    };
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .map_err(|error| BadInput(format!("cannot handle signals: {error}")))?;
-    }
-    let handle = ips_client::serve::start(&config).map_err(BadInput)?;
-    println!("READY rep={}", handle.rep_endpoint);
-    while !stop.load(Ordering::Relaxed) {
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    handle.stop();
-    Ok(String::new())
-}
-
-fn json_line(value: &impl serde::Serialize) -> Result<String, BadInput> {
-    serde_json::to_string(value)
-        .map(|text| text + "\n")
-        .map_err(|error| BadInput(format!("cannot encode the result as JSON: {error}")))
 }
 
 /// clap's messages spread over several lines followed by usage hints; the contract is one line.
@@ -176,7 +68,7 @@ fn one_line(message: &str) -> String {
     }
 }
 
-fn bad_input(error: &BadInput) -> ExitCode {
+fn fail(error: &CliError) -> ExitCode {
     eprintln!("ips: {error}");
-    ExitCode::from(2)
+    ExitCode::from(error.exit_code())
 }

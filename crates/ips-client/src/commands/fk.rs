@@ -1,10 +1,37 @@
 //! `ips fk`: forward kinematics of any chain of a URDF robot.
 
+use std::path::PathBuf;
+
 use align_core::pose::{matrix_rows, xyz_rpy};
 use serde::Serialize;
 
-use crate::cli::FkArgs;
-use crate::{BadInput, parse_number_list};
+use clap::Args;
+
+use crate::{BadInput, CliError, json_line, parse_number_list};
+
+#[derive(Debug, Args)]
+pub struct FkArgs {
+    /// Robot description (URDF; expand xacro files first).
+    #[arg(long, value_name = "FILE")]
+    pub urdf: PathBuf,
+    /// Where a ROS package named in package:// mesh URIs lives; repeatable. Packages not given
+    /// are looked for among the URDF file's parent folders.
+    #[arg(long = "package-dir", value_name = "NAME=DIR")]
+    pub package_dirs: Vec<String>,
+    /// Link the pose is expressed in.
+    #[arg(long, value_name = "LINK")]
+    pub base: String,
+    /// Link whose pose is computed.
+    #[arg(long, value_name = "LINK")]
+    pub tip: String,
+    /// Joint values of the chain's movable joints from base to tip, comma-separated
+    /// (rad for revolute, m for prismatic). Use --q=-1,... when the first value is negative.
+    #[arg(long, value_name = "A,B,C,...", allow_hyphen_values = true)]
+    pub q: String,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
 
 #[derive(Debug, Serialize)]
 pub struct FkOutput {
@@ -17,6 +44,19 @@ pub struct FkOutput {
     pub joints: Vec<String>,
     /// Mesh URIs that could not be resolved (kinematics does not need them).
     pub warnings: Vec<String>,
+}
+
+/// The command: prints the pose (warnings about the model on stderr).
+pub fn command(args: &FkArgs) -> Result<String, CliError> {
+    let output = run(args)?;
+    for warning in &output.warnings {
+        eprintln!("warning: {warning}");
+    }
+    if args.json {
+        json_line(&output)
+    } else {
+        Ok(output.to_text())
+    }
 }
 
 pub fn run(args: &FkArgs) -> Result<FkOutput, BadInput> {

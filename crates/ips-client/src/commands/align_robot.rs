@@ -9,7 +9,7 @@ use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, al
 use clap::Args;
 use serde::Serialize;
 
-use crate::{BadInput, parse_number_list};
+use crate::{BadInput, CliError, json_line, parse_number_list};
 
 #[derive(Debug, Args)]
 pub struct AlignRobotArgs {
@@ -79,6 +79,16 @@ pub struct AlignRobotOutput {
     pub iterations: usize,
     pub cloud_points: usize,
     pub time_s: f64,
+}
+
+/// The command: prints the fitted robot.
+pub fn command(args: &AlignRobotArgs) -> Result<String, CliError> {
+    let output = run(args)?;
+    if args.json {
+        json_line(&output)
+    } else {
+        Ok(output.to_text())
+    }
 }
 
 pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {

@@ -1,8 +1,6 @@
-//! The session file (DESIGN.md 6.3, `cobot-align/session@1`): robot, tool, part and the
-//! inspections taken, with paths relative to the file. Loading it resolves everything the
-//! alignment needs: the chain, the tool, the part's mesh and the touches in the base frame.
+//! A session file resolved into what the alignment needs: the chain, the tool, the part's mesh
+//! and the touches in the base frame. The file's shape is [`protocol::session`] (DESIGN.md 6.3).
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use align_core::geometry::Mesh;
@@ -12,91 +10,10 @@ use align_core::pose::isometry_from_xyz_rpy;
 use align_core::registration::psa::{Face, Touch};
 use align_core::tool::Tool;
 use nalgebra::{Isometry3, Point3, Vector3};
-use serde::{Deserialize, Serialize};
+use protocol::Pose;
+use protocol::session::{FORMAT, Inspection, SessionFile};
 
 use crate::BadInput;
-
-pub const FORMAT: &str = "cobot-align/session@1";
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SessionFile {
-    pub format: String,
-    /// Optional when every inspection gives its `flange_pose` (DESIGN.md 6.3).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub robot: Option<RobotSection>,
-    pub tool: ToolSection,
-    pub part: PartSection,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub noise_sigma: Option<f64>,
-    pub inspections: Vec<Inspection>,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct RobotSection {
-    pub urdf: String,
-    pub base_link: String,
-    pub tip_link: String,
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub package_dirs: BTreeMap<String, String>,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct PoseSection {
-    pub xyz: [f64; 3],
-    pub rpy: [f64; 3],
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ToolSection {
-    pub tcp: PoseSection,
-    #[serde(default)]
-    pub tip_radius: f64,
-    #[serde(default)]
-    pub mass: f64,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct PartSection {
-    pub mesh: String,
-    #[serde(default = "unit_scale")]
-    pub mesh_scale: f64,
-    pub nominal_pose: PoseSection,
-    /// Named planar faces (datum features) inspections may refer to; an extension of 6.3.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub faces: Vec<FaceSection>,
-}
-
-fn unit_scale() -> f64 {
-    1.0
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct FaceSection {
-    pub name: String,
-    /// Outward normal in the part frame.
-    pub normal: [f64; 3],
-    /// A point of the face's plane in the part frame, m.
-    pub point: [f64; 3],
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Inspection {
-    pub id: String,
-    /// Joint positions, rad (or m for prismatic joints).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub q: Option<Vec<f64>>,
-    /// `base_from_flange` as the controller reports it instead of joints: x, y, z (m) and a
-    /// rotation vector (rad), as a UR's `actual_TCP_pose` with a zero TCP offset.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub flange_pose: Option<[f64; 6]>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub qd: Option<Vec<f64>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub stamp: Option<f64>,
-    /// The part face this touch was meant for (a face hint); an extension of 6.3.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub face: Option<String>,
-}
 
 /// A session with everything resolved.
 #[derive(Debug)]
@@ -111,7 +28,7 @@ pub struct LoadedSession {
     pub touches: Vec<Touch>,
 }
 
-fn pose(section: &PoseSection, what: &str) -> Result<Isometry3<f64>, BadInput> {
+fn pose(section: &Pose, what: &str) -> Result<Isometry3<f64>, BadInput> {
     if section
         .xyz
         .iter()
@@ -129,15 +46,7 @@ impl LoadedSession {
         let text = std::fs::read_to_string(path).map_err(|error| {
             BadInput(format!("cannot read session '{}': {error}", path.display()))
         })?;
-        let file: SessionFile = serde_json::from_str(&text)
-            .map_err(|error| BadInput(format!("session '{}': {error}", path.display())))?;
-        if file.format != FORMAT {
-            return Err(BadInput(format!(
-                "session '{}': format '{}' is not '{FORMAT}'",
-                path.display(),
-                file.format
-            )));
-        }
+        let file = parse_session_file(&text, &path.display().to_string())?;
         let folder = path.parent().unwrap_or(Path::new("."));
         Self::resolve(file, folder)
     }
@@ -190,7 +99,7 @@ impl LoadedSession {
         }
         let mut touches = Vec::with_capacity(file.inspections.len());
         for inspection in &file.inspections {
-            let base_from_flange = inspection.base_from_flange(chain.as_ref())?;
+            let base_from_flange = base_from_flange(inspection, chain.as_ref())?;
             let base_from_tcp = tool.base_from_tcp(&base_from_flange);
             touches.push(Touch {
                 id: inspection.id.clone(),
@@ -213,12 +122,28 @@ impl LoadedSession {
     }
 }
 
-impl Inspection {
-    /// The flange pose this inspection stands for: forward kinematics of its joints, or the
-    /// `flange_pose` it gives. Exactly one of the two must be present.
-    pub fn base_from_flange(&self, chain: Option<&Chain>) -> Result<Isometry3<f64>, BadInput> {
-        let id = &self.id;
-        match (&self.q, &self.flange_pose) {
+/// Reads a session file's text, checking its format; `name` says where it came from in errors.
+pub fn parse_session_file(text: &str, name: &str) -> Result<SessionFile, BadInput> {
+    let file: SessionFile = serde_json::from_str(text)
+        .map_err(|error| BadInput(format!("session '{name}': {error}")))?;
+    if file.format != FORMAT {
+        return Err(BadInput(format!(
+            "session '{name}': format '{}' is not '{FORMAT}'",
+            file.format
+        )));
+    }
+    Ok(file)
+}
+
+/// The flange pose an inspection stands for: forward kinematics of its joints, or the
+/// `flange_pose` it gives. Exactly one of the two must be present.
+pub fn base_from_flange(
+    inspection: &Inspection,
+    chain: Option<&Chain>,
+) -> Result<Isometry3<f64>, BadInput> {
+    let id = &inspection.id;
+    {
+        match (&inspection.q, &inspection.flange_pose) {
             (Some(_), Some(_)) => Err(BadInput(format!(
                 "inspection '{id}' gives both q and flange_pose: give one"
             ))),

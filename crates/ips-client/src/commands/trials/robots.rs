@@ -11,8 +11,8 @@ use align_core::trials::robot_trials::{
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Serialize;
 
+use super::args::TrialsArgs;
 use crate::BadInput;
-use crate::cli::TrialsArgs;
 
 #[derive(Debug, Serialize)]
 pub struct TallyJson {

@@ -8,8 +8,8 @@ use align_core::trials::parts::{TestPart, step_block};
 use align_core::trials::{TouchSetup, TrialRow, run_pca_trials, run_psa_trials};
 use serde::Serialize;
 
+use super::args::TrialsArgs;
 use crate::BadInput;
-use crate::cli::TrialsArgs;
 
 #[derive(Debug, Serialize)]
 pub struct TrialsOutput {

@@ -1,0 +1,338 @@
+//! The request thread: one handler per [`ServiceCommand`], each returning its typed reply.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use align_core::kinematics::Chain;
+use align_core::tool::Tool;
+use nalgebra::{DVector, Vector3};
+use protocol::reports::{AlignReport, CloudReport, DiagnoseReport};
+use protocol::session::{Inspection, SessionFile};
+use protocol::{
+    AlignCloudRequest, Command, InspectionCountReply, InspectionsReply, JournalEntry,
+    MirroringReply, ProtocolError, RobotSide, SavedReply, ServiceCommand, ServiceReply,
+    StatusReply,
+};
+use serde::Serialize;
+
+use super::journal::{Journal, highest_id};
+use super::samples::{JointSample, Samples};
+use super::{Config, socket};
+use crate::BadInput;
+use crate::jobs::{align, cloud, diagnose};
+use crate::session::{LoadedSession, parse_session_file};
+
+/// Why a request was refused; its text is the reply's `reason`.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum RequestError {
+    /// Not a service request, or one with the wrong shape.
+    #[error(transparent)]
+    Malformed(#[from] ProtocolError),
+    /// The request's files or data are unusable.
+    #[error(transparent)]
+    BadInput(#[from] BadInput),
+    /// The service's state does not allow it now (a stale joint state, unknown ids, the bridge).
+    #[error("{0}")]
+    Refused(String),
+}
+
+impl From<String> for RequestError {
+    fn from(reason: String) -> Self {
+        RequestError::Refused(reason)
+    }
+}
+
+type Handled<T> = Result<T, RequestError>;
+
+pub(crate) struct Service {
+    pub template: SessionFile,
+    /// The session file's folder: its relative paths are relative to it.
+    pub folder: PathBuf,
+    pub inspections: Vec<Inspection>,
+    pub next_id: u64,
+    pub journal: Journal,
+    pub mirroring: bool,
+    pub samples: Arc<Samples>,
+    pub config: Config,
+    pub context: zmq::Context,
+    /// How the bridge names itself in headers (`ros`, `IiwaDrive`), learnt from its status.
+    pub bridge_side: Option<RobotSide>,
+    pub chain: Chain,
+    pub tool: Tool,
+}
+
+fn reply<T: Serialize>(result: Handled<T>) -> ServiceReply {
+    match result.map(|data| protocol::service_reply_ok(&data)) {
+        Ok(Ok(reply)) => reply,
+        Ok(Err(error)) => {
+            protocol::service_reply_error(format!("cannot encode the reply: {error}"))
+        }
+        Err(error) => protocol::service_reply_error(error.to_string()),
+    }
+}
+
+impl Service {
+    pub(crate) fn serve(&mut self, rep: &zmq::Socket, stop: &AtomicBool) {
+        while !stop.load(Ordering::Relaxed) {
+            let request = match rep.recv_bytes(0) {
+                Ok(request) => request,
+                Err(zmq::Error::EAGAIN) => continue,
+                Err(_) => return,
+            };
+            while rep.get_rcvmore().unwrap_or(false) {
+                let _ = rep.recv_bytes(0);
+            }
+            let reply = self.handle(&request);
+            let text = protocol::to_json(&reply).unwrap_or_default();
+            let _ = rep.send(text.as_bytes(), 0);
+        }
+    }
+
+    pub(crate) fn stop_mirroring_on_exit(&mut self) {
+        if self.mirroring {
+            let _ = self.bridge(Command::Stop);
+        }
+    }
+
+    fn handle(&mut self, bytes: &[u8]) -> ServiceReply {
+        let request = match protocol::parse_service_request(bytes) {
+            Ok(request) => request,
+            Err(error) => return reply::<()>(Err(error.into())),
+        };
+        match request.body {
+            ServiceCommand::Status => reply(Ok(self.status())),
+            ServiceCommand::Start => reply(self.set_mirroring(true)),
+            ServiceCommand::Stop => reply(self.set_mirroring(false)),
+            ServiceCommand::Get(get) => reply(self.get(get.time_s)),
+            ServiceCommand::List => reply(Ok(InspectionsReply {
+                inspections: self.inspections.clone(),
+            })),
+            ServiceCommand::Remove(remove) => reply(self.remove(remove.ids)),
+            ServiceCommand::Reset => reply(self.reset()),
+            ServiceCommand::Align => reply(self.align()),
+            ServiceCommand::AlignCloud(request) => reply(self.align_cloud(&request)),
+            ServiceCommand::Diagnose => reply(self.diagnose()),
+            ServiceCommand::Save(save) => reply(self.save(save.path)),
+            ServiceCommand::Load(load) => reply(self.load(load.path)),
+        }
+    }
+
+    fn journal(&mut self, entry: &JournalEntry) -> Handled<()> {
+        self.journal.append(entry).map_err(RequestError::Refused)
+    }
+
+    /// What `save` would write: the template's robot, tool and part with the inspections in
+    /// memory.
+    fn session_file(&self) -> SessionFile {
+        let mut file = self.template.clone();
+        file.inspections = self.inspections.clone();
+        file
+    }
+
+    fn status(&self) -> StatusReply {
+        let age = self
+            .samples
+            .latest()
+            .map(|s| s.received.elapsed().as_secs_f64());
+        StatusReply {
+            inspections: self.inspections.len(),
+            mirroring: self.mirroring,
+            sample_age_s: age,
+            stale: age.is_none_or(|a| a > self.config.max_sample_age_s),
+        }
+    }
+
+    fn set_mirroring(&mut self, mirroring: bool) -> Handled<MirroringReply> {
+        self.bridge(if mirroring {
+            Command::Start
+        } else {
+            Command::Stop
+        })?;
+        self.mirroring = mirroring;
+        Ok(MirroringReply { mirroring })
+    }
+
+    /// Sends one of the thesis's instructions to the bridge and returns its ack, or why not.
+    fn instruct(&self, to: RobotSide, command: Command) -> Result<protocol::Instruction, String> {
+        let endpoint = &self.config.bridge_rep;
+        let req =
+            socket(&self.context, zmq::REQ, 2000, endpoint).map_err(|error| error.to_string())?;
+        req.connect(endpoint).map_err(|e| e.to_string())?;
+        let text =
+            protocol::to_json(&protocol::instruction(to, command)).map_err(|e| e.to_string())?;
+        req.send(text.as_bytes(), 0)
+            .map_err(|e| format!("bridge unreachable: {e}"))?;
+        let reply = req
+            .recv_bytes(0)
+            .map_err(|_| format!("no answer from the bridge at {endpoint} within 2 s"))?;
+        serde_json::from_slice(&reply).map_err(|e| format!("bad ack from the bridge: {e}"))
+    }
+
+    /// Asks the bridge to start or stop mirroring, addressed as the bridge names itself: a UR
+    /// bridge is the thesis's "ros", an iiwa bridge "IiwaDrive". The name is learnt once from
+    /// the bridge's status reply.
+    fn bridge(&mut self, command: Command) -> Result<(), String> {
+        let side = match self.bridge_side {
+            Some(side) => side,
+            None => {
+                let status = self.instruct(RobotSide::Ros, Command::Status)?;
+                let side = RobotSide::from_name(&status.header.from).unwrap_or(RobotSide::Ros);
+                self.bridge_side = Some(side);
+                side
+            }
+        };
+        let ack = self.instruct(side, command)?;
+        if ack.body.content == "ok" {
+            Ok(())
+        } else {
+            Err(format!(
+                "the bridge refused: {}",
+                ack.body.reason.unwrap_or_default()
+            ))
+        }
+    }
+
+    /// Captures the latest sample, or with `time_s` the first sample at or after that controller
+    /// time (a touch-trigger probe's time stamp), as an inspection.
+    fn get(&mut self, time_s: Option<f64>) -> Handled<Inspection> {
+        let latest = self
+            .samples
+            .latest()
+            .ok_or("no joint state received yet: start mirroring first".to_owned())?;
+        let age = latest.received.elapsed().as_secs_f64();
+        if age > self.config.max_sample_age_s {
+            return Err(format!(
+                "latest joint state is {age:.3} s old (limit {} s): is the bridge mirroring and the robot connected?",
+                self.config.max_sample_age_s
+            )
+            .into());
+        }
+        let sample = match time_s {
+            None => latest,
+            Some(time_s) => self.samples.at(time_s)?,
+        };
+        self.check_at_rest(&sample)?;
+        let inspection = Inspection {
+            id: self.next_id.to_string(),
+            q: Some(sample.q),
+            flange_pose: None,
+            qd: Some(sample.qd),
+            stamp: Some(sample.controller_time),
+            face: None,
+        };
+        self.journal(&JournalEntry::Add {
+            inspection: inspection.clone(),
+        })?;
+        self.next_id += 1;
+        self.inspections.push(inspection.clone());
+        Ok(inspection)
+    }
+
+    /// Refuses a sample whose tool moves faster than the limit: a touch is taken at rest.
+    fn check_at_rest(&self, sample: &JointSample) -> Result<(), String> {
+        self.chain
+            .check_joints(&sample.q)
+            .map_err(|e| e.to_string())?;
+        let (base_from_flange, jacobian) = self.chain.jacobian_unchecked(&sample.q);
+        // TCP velocity: flange linear velocity plus omega x (flange -> TCP lever).
+        let twist = &jacobian * DVector::from_column_slice(&sample.qd);
+        let linear = Vector3::new(twist[0], twist[1], twist[2]);
+        let angular = Vector3::new(twist[3], twist[4], twist[5]);
+        let lever = base_from_flange.rotation * self.tool.flange_from_tcp.translation.vector;
+        let speed = (linear + angular.cross(&lever)).norm();
+        if speed > self.config.max_tool_speed_m_s {
+            return Err(format!(
+                "the tool moves at {:.1} mm/s (limit {:.1} mm/s): take touches at rest",
+                speed * 1e3,
+                self.config.max_tool_speed_m_s * 1e3
+            ));
+        }
+        Ok(())
+    }
+
+    fn remove(&mut self, ids: Vec<String>) -> Handled<InspectionCountReply> {
+        let unknown: Vec<&String> = ids
+            .iter()
+            .filter(|id| !self.inspections.iter().any(|i| &i.id == *id))
+            .collect();
+        if ids.is_empty() || !unknown.is_empty() {
+            return Err(
+                format!("remove needs existing inspection ids; unknown: {unknown:?}").into(),
+            );
+        }
+        self.journal(&JournalEntry::Remove { ids: ids.clone() })?;
+        self.inspections.retain(|i| !ids.contains(&i.id));
+        Ok(InspectionCountReply {
+            inspections: self.inspections.len(),
+        })
+    }
+
+    fn reset(&mut self) -> Handled<InspectionCountReply> {
+        self.journal(&JournalEntry::Reset)?;
+        self.inspections.clear();
+        Ok(InspectionCountReply { inspections: 0 })
+    }
+
+    fn loaded_session(&self) -> Handled<LoadedSession> {
+        Ok(LoadedSession::resolve(self.session_file(), &self.folder)?)
+    }
+
+    fn align(&self) -> Handled<AlignReport> {
+        let session = self.loaded_session()?;
+        let result = align::align_session(&session, align::AlignChoices::default())?;
+        Ok(align::report(&session, &result))
+    }
+
+    fn align_cloud(&self, request: &AlignCloudRequest) -> Handled<CloudReport> {
+        let job = cloud::from_request(request, &self.template.part, &self.folder)?;
+        Ok(cloud::align(&job)?)
+    }
+
+    fn diagnose(&self) -> Handled<DiagnoseReport> {
+        let session = self.loaded_session()?;
+        Ok(diagnose::diagnose_session(&session)?.report(None))
+    }
+
+    fn save(&self, path: String) -> Handled<SavedReply> {
+        let mut file = self.session_file();
+        // The file may land anywhere: paths relative to the template would break.
+        let absolute = |relative: &str| {
+            let joined = self.folder.join(relative);
+            joined
+                .canonicalize()
+                .unwrap_or(joined)
+                .display()
+                .to_string()
+        };
+        file.part.mesh = absolute(&file.part.mesh);
+        if let Some(robot) = &mut file.robot {
+            robot.urdf = absolute(&robot.urdf);
+            for dir in robot.package_dirs.values_mut() {
+                *dir = absolute(dir);
+            }
+        }
+        let text = serde_json::to_string_pretty(&file)
+            .map_err(|e| RequestError::Refused(e.to_string()))?;
+        std::fs::write(&path, text + "\n").map_err(|e| format!("cannot write '{path}': {e}"))?;
+        Ok(SavedReply {
+            inspections: file.inspections.len(),
+            path,
+        })
+    }
+
+    fn load(&mut self, path: String) -> Handled<InspectionCountReply> {
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("cannot read '{path}': {e}"))?;
+        let file = parse_session_file(&text, &path)?;
+        // One journal entry, so a crash leaves either the old list or the new one.
+        self.journal(&JournalEntry::Load {
+            inspections: file.inspections.clone(),
+        })?;
+        self.next_id = highest_id(&file.inspections) + 1;
+        self.inspections = file.inspections;
+        Ok(InspectionCountReply {
+            inspections: self.inspections.len(),
+        })
+    }
+}

@@ -1,0 +1,241 @@
+//! `ips align-cloud`: Point Cloud Alignment of a part's mesh to a scan, run here from the
+//! command line or asked of a running service (`--service`, request `align-cloud`). Both run
+//! `align_service::jobs::cloud::align`, so the service's reply is the command's `--json`
+//! document.
+
+use std::path::PathBuf;
+
+use align_core::pose::isometry_from_xyz_rpy;
+use align_service::jobs::cloud::{CloudAlignment, align, check_delta, cloud_options};
+use clap::Args;
+use protocol::reports::CloudReport;
+use protocol::{AlignCloudRequest, Pose, ServiceCommand};
+
+use crate::{BadInput, CliError, client, json_line};
+
+#[derive(Debug, Args)]
+pub struct AlignCloudArgs {
+    /// Scanner cloud (.ply, .pcd, .xyz, .csv, .txt), in the robot base frame. With --service,
+    /// the path as the service sees it.
+    #[arg(long, value_name = "FILE")]
+    pub cloud: PathBuf,
+    /// Part mesh (.stl, .obj, .ply). Required without --service; with it, the default is the
+    /// service session's part.
+    #[arg(long, value_name = "FILE", required_unless_present = "service")]
+    pub mesh: Option<PathBuf>,
+    /// Unit of the mesh file in metres (0.001 for mm) [default: 1; with --service and no
+    /// --mesh, the session part's own].
+    #[arg(long)]
+    pub mesh_scale: Option<f64>,
+    /// Unit of the cloud file in metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub cloud_scale: f64,
+    /// Nominal part pose in the base frame: x,y,z (m), roll,pitch,yaw (rad). Required without
+    /// --service; with it, the default is the session part's nominal pose.
+    #[arg(
+        long,
+        value_name = "X,Y,Z,R,P,Y",
+        allow_hyphen_values = true,
+        required_unless_present = "service"
+    )]
+    pub pose: Option<String>,
+    /// Upper bound of the nominal pose's error, m (the thesis's delta). Required without
+    /// --service; with it, the default is 0.1.
+    #[arg(long, required_unless_present = "service")]
+    pub delta: Option<f64>,
+    /// The thesis's SVD step instead of point-to-plane.
+    #[arg(long)]
+    pub point_to_point: bool,
+    /// Delta shrinks as cos^2 (the thesis's code) instead of cos (its eq. 33).
+    #[arg(long)]
+    pub cos_squared: bool,
+    /// No exploration of orientations around the nominal pose (the thesis's behaviour).
+    #[arg(long)]
+    pub local: bool,
+    /// Ask the running alignment service at this REP endpoint (e.g. tcp://127.0.0.1:4000) to
+    /// align instead of aligning here.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub service: Option<String>,
+    /// Print one JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The command: aligned here, or by the service `--service` names.
+pub fn run(args: &AlignCloudArgs) -> Result<String, CliError> {
+    let report: CloudReport = match &args.service {
+        Some(endpoint) => client::request(
+            endpoint,
+            ServiceCommand::AlignCloud(Box::new(service_request(args)?)),
+        )?,
+        None => run_here(args)?,
+    };
+    if args.json {
+        json_line(&report)
+    } else {
+        Ok(to_text(&report))
+    }
+}
+
+/// Flags to a [`CloudAlignment`], run in this process.
+fn run_here(args: &AlignCloudArgs) -> Result<CloudReport, BadInput> {
+    let (Some(mesh), Some(pose), Some(delta_m)) = (&args.mesh, &args.pose, args.delta) else {
+        return Err(BadInput(
+            "--mesh, --pose and --delta are required without --service".to_owned(),
+        ));
+    };
+    let start = parse_pose(pose)?;
+    check_delta(delta_m, "--delta")?;
+    align(&CloudAlignment {
+        cloud: args.cloud.clone(),
+        cloud_scale: args.cloud_scale,
+        mesh: mesh.clone(),
+        mesh_scale: args.mesh_scale.unwrap_or(1.0),
+        base_from_part_start: isometry_from_xyz_rpy(start.xyz, start.rpy),
+        delta_m,
+        options: cloud_options(args.point_to_point, args.cos_squared, args.local),
+    })
+}
+
+/// The flags' request to a service: only what the user gave, so the service's defaults apply
+/// to the rest.
+pub fn service_request(args: &AlignCloudArgs) -> Result<AlignCloudRequest, BadInput> {
+    let delta_m = args.delta;
+    if let Some(delta_m) = delta_m {
+        check_delta(delta_m, "--delta")?;
+    }
+    Ok(AlignCloudRequest {
+        cloud: args.cloud.display().to_string(),
+        cloud_scale: Some(args.cloud_scale),
+        mesh: args.mesh.as_ref().map(|mesh| mesh.display().to_string()),
+        mesh_scale: args.mesh_scale,
+        start_pose: args.pose.as_deref().map(parse_pose).transpose()?,
+        delta_m,
+        // Flags left off are left out: the request then reads as the user typed it.
+        point_to_point: args.point_to_point.then_some(true),
+        cos_squared: args.cos_squared.then_some(true),
+        local: args.local.then_some(true),
+    })
+}
+
+fn parse_pose(text: &str) -> Result<Pose, BadInput> {
+    let values = crate::parse_number_list(text, "--pose")?;
+    let [x, y, z, roll, pitch, yaw] = values[..] else {
+        return Err(BadInput(format!(
+            "--pose needs 6 values x,y,z,roll,pitch,yaw, got {}",
+            values.len()
+        )));
+    };
+    Ok(Pose::new([x, y, z], [roll, pitch, yaw]))
+}
+
+pub fn to_text(report: &CloudReport) -> String {
+    let [x, y, z] = report.pose.xyz.map(|v| crate::display_round(v, 6));
+    let [roll, pitch, yaw] = report.pose.rpy.map(|v| crate::display_round(v, 6));
+    let mut text = format!(
+        "base_from_part: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
+    );
+    text += &format!(
+        "{} after {} iterations ({} runs) in {:.1} ms\n",
+        if report.converged {
+            "converged"
+        } else {
+            "NOT converged (iteration limit)"
+        },
+        report.iterations,
+        report.starts,
+        report.time_s * 1e3
+    );
+    text += &format!(
+        "{} cloud points -> {} keypoints, {} kept within {:.1} mm of the part: rms {:.3} mm, max {:.3} mm\n",
+        report.cloud_points,
+        report.keypoints,
+        report.kept_points,
+        report.final_delta * 1e3,
+        report.rms * 1e3,
+        report.max * 1e3
+    );
+    for note in &report.notes {
+        text += &format!("note: {note}\n");
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+    use clap::Parser;
+
+    use crate::cli::{Cli, Command};
+
+    fn request_for(args: &[&str]) -> protocol::AlignCloudRequest {
+        let cli = Cli::try_parse_from(args).unwrap();
+        let Command::AlignCloud(args) = cli.command else {
+            panic!("not align-cloud");
+        };
+        super::service_request(&args).unwrap()
+    }
+
+    #[test]
+    fn flags_left_off_are_left_out_of_the_request_so_the_service_defaults_apply() {
+        let body = request_for(&[
+            "ips",
+            "align-cloud",
+            "--service",
+            "tcp://127.0.0.1:4000",
+            "--cloud",
+            "scan.ply",
+        ]);
+        assert_eq!(body.cloud, "scan.ply");
+        assert_eq!(
+            (body.mesh, body.mesh_scale, body.start_pose, body.delta_m),
+            (None, None, None, None)
+        );
+        assert_eq!(
+            (body.point_to_point, body.cos_squared, body.local),
+            (None, None, None)
+        );
+    }
+
+    #[test]
+    fn flags_given_reach_the_request() {
+        let body = request_for(&[
+            "ips",
+            "align-cloud",
+            "--service",
+            "tcp://127.0.0.1:4000",
+            "--cloud",
+            "scan.ply",
+            "--mesh",
+            "part.stl",
+            "--mesh-scale",
+            "0.001",
+            "--pose",
+            "0.6,-0.1,0.05,0,0,0.3",
+            "--delta",
+            "0.05",
+            "--point-to-point",
+            "--cos-squared",
+            "--local",
+        ]);
+        assert_eq!(body.mesh.as_deref(), Some("part.stl"));
+        assert_eq!(body.mesh_scale, Some(0.001));
+        let pose = body.start_pose.unwrap();
+        assert_eq!((pose.xyz, pose.rpy), ([0.6, -0.1, 0.05], [0.0, 0.0, 0.3]));
+        assert_eq!(body.delta_m, Some(0.05));
+        assert_eq!(
+            (body.point_to_point, body.cos_squared, body.local),
+            (Some(true), Some(true), Some(true))
+        );
+    }
+
+    #[test]
+    fn the_offline_command_still_needs_mesh_pose_and_delta() {
+        let error = Cli::try_parse_from(["ips", "align-cloud", "--cloud", "scan.ply"]).unwrap_err();
+        let message = error.to_string();
+        for flag in ["--mesh", "--pose", "--delta"] {
+            assert!(message.contains(flag), "{message}");
+        }
+    }
+}

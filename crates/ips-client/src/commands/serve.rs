@@ -1,0 +1,64 @@
+//! `ips serve`: the alignment service (the `align-service` library) until SIGINT or SIGTERM.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use align_service::server::{self, ServiceError};
+use clap::Args;
+
+use crate::CliError;
+
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Session file naming robot, tool and part (its inspections start the list when no
+    /// journal exists yet).
+    #[arg(long, value_name = "FILE")]
+    pub session: PathBuf,
+    /// Journal of inspections (appended and flushed before every acknowledgement).
+    #[arg(long, value_name = "FILE", default_value = "inspections.journal")]
+    pub journal: PathBuf,
+    #[arg(long, default_value = "tcp://*:4000")]
+    pub rep: String,
+    #[arg(long, default_value = "tcp://127.0.0.1:2000")]
+    pub bridge_rep: String,
+    #[arg(long, default_value = "tcp://127.0.0.1:3000")]
+    pub bridge_pub: String,
+    /// Oldest joint state a `get` accepts, s.
+    #[arg(long, default_value_t = 0.1)]
+    pub max_sample_age: f64,
+    /// Fastest tool a `get` accepts, m/s.
+    #[arg(long, default_value_t = 0.005)]
+    pub max_tool_speed: f64,
+}
+
+impl ServeArgs {
+    pub fn config(&self) -> server::Config {
+        server::Config {
+            session: self.session.clone(),
+            journal: self.journal.clone(),
+            rep: self.rep.clone(),
+            bridge_rep: self.bridge_rep.clone(),
+            bridge_pub: self.bridge_pub.clone(),
+            max_sample_age_s: self.max_sample_age,
+            max_tool_speed_m_s: self.max_tool_speed,
+        }
+    }
+}
+
+/// Serves until a signal; prints `READY rep=ENDPOINT` on stdout once requests are answered.
+pub fn run(args: &ServeArgs) -> Result<String, CliError> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .map_err(|error| CliError::Failure(format!("cannot handle signals: {error}")))?;
+    }
+    server::run(&args.config(), &stop, |endpoint| {
+        println!("READY rep={endpoint}")
+    })
+    .map_err(|error| match error {
+        ServiceError::BadInput(bad) => CliError::BadInput(bad),
+        other => CliError::Failure(other.to_string()),
+    })?;
+    Ok(String::new())
+}

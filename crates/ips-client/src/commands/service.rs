@@ -1,0 +1,163 @@
+//! `ips start|stop|get|list|remove|reset|save|load|status`: one request to a running `ips
+//! serve`, printed for people or as the reply's JSON document with `--json`.
+
+use clap::Args;
+use protocol::session::Inspection;
+use protocol::{
+    GetRequest, InspectionCountReply, InspectionsReply, MirroringReply, PathRequest, RemoveRequest,
+    SavedReply, ServiceCommand, StatusReply,
+};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::{BadInput, CliError, client, json_line};
+
+#[derive(Debug, Args)]
+pub struct ServiceArgs {
+    /// The service's REP endpoint.
+    #[arg(long, default_value = "tcp://127.0.0.1:4000")]
+    pub service: String,
+    /// Print the reply's JSON document.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct PathArgs {
+    /// Session file, as the service sees the path.
+    pub path: String,
+    #[command(flatten)]
+    pub service: ServiceArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct GetArgs {
+    /// The controller time of the touch, s (a touch-trigger probe's time stamp): the sample at
+    /// or just after it instead of the latest; the service keeps the last 4096 samples.
+    #[arg(long, value_name = "SECONDS")]
+    pub at: Option<f64>,
+    #[command(flatten)]
+    pub service: ServiceArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct RemoveArgs {
+    /// Inspection ids.
+    #[arg(required = true)]
+    pub ids: Vec<String>,
+    #[command(flatten)]
+    pub service: ServiceArgs,
+}
+
+/// Sends `command` and prints its typed reply with `text` (or as JSON).
+fn call<T: DeserializeOwned + Serialize>(
+    args: &ServiceArgs,
+    command: ServiceCommand,
+    text: impl FnOnce(&T) -> String,
+) -> Result<String, CliError> {
+    let reply: T = client::request(&args.service, command)?;
+    if args.json {
+        json_line(&reply)
+    } else {
+        Ok(text(&reply))
+    }
+}
+
+fn joints(q: Option<&Vec<f64>>) -> String {
+    match q {
+        Some(q) => serde_json::to_string(q).unwrap_or_default(),
+        None => "null".to_owned(),
+    }
+}
+
+fn mirroring_text(reply: &MirroringReply) -> String {
+    format!("mirroring: {}\n", reply.mirroring)
+}
+
+fn count_text(reply: &InspectionCountReply) -> String {
+    format!("inspections: {}\n", reply.inspections)
+}
+
+pub fn start(args: &ServiceArgs) -> Result<String, CliError> {
+    call(args, ServiceCommand::Start, mirroring_text)
+}
+
+pub fn stop(args: &ServiceArgs) -> Result<String, CliError> {
+    call(args, ServiceCommand::Stop, mirroring_text)
+}
+
+pub fn status(args: &ServiceArgs) -> Result<String, CliError> {
+    call(args, ServiceCommand::Status, |reply: &StatusReply| {
+        let age = reply
+            .sample_age_s
+            .map_or("none yet".to_owned(), |age| format!("{age:.3} s"));
+        format!(
+            "mirroring: {}, inspections: {}, latest joint state: {age}{}\n",
+            reply.mirroring,
+            reply.inspections,
+            if reply.stale { " (stale)" } else { "" }
+        )
+    })
+}
+
+/// `get`, optionally at a controller time (s).
+pub fn get(args: &GetArgs) -> Result<String, CliError> {
+    if args.at.is_some_and(|t| !t.is_finite()) {
+        return Err(BadInput("--at must be a finite controller time in s".to_owned()).into());
+    }
+    let command = ServiceCommand::Get(GetRequest { time_s: args.at });
+    call(&args.service, command, |inspection: &Inspection| {
+        format!(
+            "inspection \"{}\" at q = {}\n",
+            inspection.id,
+            joints(inspection.q.as_ref())
+        )
+    })
+}
+
+pub fn list(args: &ServiceArgs) -> Result<String, CliError> {
+    call(args, ServiceCommand::List, |reply: &InspectionsReply| {
+        let mut text = String::new();
+        for inspection in &reply.inspections {
+            text += &format!(
+                "{:>6}  q = {}\n",
+                inspection.id,
+                joints(inspection.q.as_ref())
+            );
+        }
+        if text.is_empty() {
+            text = "no inspections\n".to_owned();
+        }
+        text
+    })
+}
+
+pub fn remove(args: &RemoveArgs) -> Result<String, CliError> {
+    let command = ServiceCommand::Remove(RemoveRequest {
+        ids: args.ids.clone(),
+    });
+    call(&args.service, command, count_text)
+}
+
+pub fn reset(args: &ServiceArgs) -> Result<String, CliError> {
+    call(args, ServiceCommand::Reset, count_text)
+}
+
+pub fn save(args: &PathArgs) -> Result<String, CliError> {
+    let command = ServiceCommand::Save(PathRequest {
+        path: args.path.clone(),
+    });
+    call(&args.service, command, |reply: &SavedReply| {
+        format!(
+            "saved {} inspections to {}\n",
+            reply.inspections, reply.path
+        )
+    })
+}
+
+pub fn load(args: &PathArgs) -> Result<String, CliError> {
+    let command = ServiceCommand::Load(PathRequest {
+        path: args.path.clone(),
+    });
+    call(&args.service, command, count_text)
+}
