@@ -552,10 +552,3 @@ fn status(shared: &Shared, robot: ShippedRobot) -> sim::SimStatus {
         time: time_s,
     }
 }
-
-/// Blocks until `flag` is set (by the binary's signal handlers).
-pub fn wait_for_shutdown(flag: &AtomicBool) {
-    while !flag.load(Ordering::Relaxed) {
-        thread::sleep(Duration::from_millis(50));
-    }
-}

@@ -33,7 +33,6 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::{self, JoinHandle};
-use std::time::Duration;
 
 use crate::BadInput;
 use crate::session::{LoadedSession, parse_session_file};
@@ -98,20 +97,16 @@ impl Drop for Handle {
     }
 }
 
-/// Runs the service until `shutdown` is set; `on_ready` gets the bound REP endpoint once the
-/// service answers requests.
+/// Runs the service until `shutdown` returns (the binary's blocks until SIGINT or SIGTERM);
+/// `on_ready` gets the bound REP endpoint once the service answers requests.
 pub fn run(
     config: &Config,
-    shutdown: &AtomicBool,
     on_ready: impl FnOnce(&str),
+    shutdown: impl FnOnce(),
 ) -> Result<(), ServiceError> {
     let handle = start(config)?;
     on_ready(&handle.rep_endpoint);
-    while !shutdown.load(Ordering::Relaxed) {
-        // A signal handler can only set a flag: this is the service's own poll of it, not a
-        // synchronisation with another thread.
-        thread::sleep(Duration::from_millis(50));
-    }
+    shutdown();
     handle.stop();
     Ok(())
 }

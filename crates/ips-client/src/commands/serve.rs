@@ -1,11 +1,10 @@
 //! `ips serve`: the alignment service (the `align-service` library) until SIGINT or SIGTERM.
 
-use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
-
 use align_service::server::{self, ServiceError};
 use clap::Args;
+use signal_hook::consts::{SIGINT, SIGTERM};
+use signal_hook::iterator::Signals;
+use std::path::PathBuf;
 
 use crate::CliError;
 
@@ -48,14 +47,15 @@ impl ServeArgs {
 
 /// Serves until a signal; prints `READY rep=ENDPOINT` on stdout once requests are answered.
 pub fn run(args: &ServeArgs) -> Result<String, CliError> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .map_err(|error| CliError::Failure(format!("cannot handle signals: {error}")))?;
-    }
-    server::run(&args.config(), &stop, |endpoint| {
-        println!("READY rep={endpoint}")
-    })
+    let mut signals = Signals::new([SIGINT, SIGTERM])
+        .map_err(|error| CliError::Failure(format!("cannot handle signals: {error}")))?;
+    server::run(
+        &args.config(),
+        |endpoint| println!("READY rep={endpoint}"),
+        || {
+            signals.forever().next();
+        },
+    )
     .map_err(|error| match error {
         ServiceError::BadInput(bad) => CliError::BadInput(bad),
         other => CliError::Failure(other.to_string()),

@@ -1,9 +1,9 @@
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use align_core::robots::ShippedRobot;
 use clap::Parser;
+use signal_hook::consts::{SIGINT, SIGTERM};
+use signal_hook::iterator::Signals;
 
 /// A simulated cobot controller speaking the real controller's protocol (UR: RTDE server; iiwa:
 /// FRI monitoring messages to a client), plus a ZeroMQ control socket for tests.
@@ -72,13 +72,13 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        if let Err(error) = signal_hook::flag::register(signal, Arc::clone(&stop)) {
+    let mut signals = match Signals::new([SIGINT, SIGTERM]) {
+        Ok(signals) => signals,
+        Err(error) => {
             eprintln!("sim-robot: cannot handle signals: {error}");
             return ExitCode::from(1);
         }
-    }
+    };
     match (
         &handle.rtde_address,
         &handle.fri_address,
@@ -91,7 +91,8 @@ fn main() -> ExitCode {
         ),
         _ => println!("READY control={}", handle.control_endpoint),
     }
-    sim_robot::wait_for_shutdown(&stop);
+    // Blocks until SIGINT or SIGTERM.
+    signals.forever().next();
     handle.stop();
     ExitCode::SUCCESS
 }
