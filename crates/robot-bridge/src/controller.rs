@@ -131,3 +131,36 @@ pub(crate) fn backend_loop(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn states_are_named_as_the_status_reply_always_named_them() {
+        let names = [
+            ControllerState::Connecting,
+            ControllerState::Connected,
+            ControllerState::Lost,
+        ]
+        .map(ControllerState::name);
+        assert_eq!(names, ["connecting", "connected", "lost"]);
+        assert_eq!(ControllerState::default(), ControllerState::Connecting);
+    }
+
+    #[test]
+    fn sessions_ended_while_connected_count_as_reconnects_and_failed_retries_do_not() {
+        let mut record = ControllerRecord::default();
+        record.on_connecting();
+        record.on_connected();
+        // A new session straight after the old one, then a loss, then a failed retry.
+        record.on_connected();
+        record.on_lost("gone".to_owned());
+        record.on_lost("still gone".to_owned());
+        assert_eq!(record.reconnects, 2);
+        assert_eq!(record.state, ControllerState::Lost);
+        assert_eq!(record.reason.as_deref(), Some("still gone"));
+        record.on_connected();
+        assert_eq!(record.reason, None);
+    }
+}

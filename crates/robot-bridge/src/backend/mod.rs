@@ -1,6 +1,10 @@
 //! Controller back ends: each turns a controller's own protocol into [`Event`]s. A back end is a
 //! module owning its settings (a type implementing [`BackendSettings`]) and its connection (a
 //! type implementing [`Backend`]); [`BackendConfig`] lists them, and is the only place that does.
+//!
+//! Adding a robot brand: a module here (settings, connection), a [`BackendKind`] and a
+//! [`BackendConfig`] variant, its flags in `src/bin/robot-bridge.rs`, and a test file with a
+//! `Cell` for it and the line `conformance!(BrandCell);` (see `tests/conformance/mod.rs`).
 
 pub mod dummy;
 pub mod iiwa;

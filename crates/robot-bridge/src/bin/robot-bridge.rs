@@ -17,16 +17,18 @@ struct Args {
     /// Controller address (iiwa: only its FRI datagrams are accepted).
     #[arg(long)]
     robot_host: String,
-    #[command(flatten)]
-    ur: UrArgs,
-    #[command(flatten)]
-    iiwa: IiwaArgs,
     /// Instruction socket (REP).
     #[arg(long, default_value = "tcp://*:2000")]
     rep: String,
     /// Hardware-state socket (PUB).
     #[arg(long = "pub", default_value = "tcp://*:3000")]
     publish: String,
+    // Each back end's own options, under its own heading in --help; a back end ignores the
+    // others' (their defaults), as before.
+    #[command(flatten)]
+    ur: UrArgs,
+    #[command(flatten)]
+    iiwa: IiwaArgs,
 }
 
 /// The back ends a controller can be reached with from the command line.
