@@ -76,10 +76,10 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
     .unwrap();
     let port = sim.rtde_port().unwrap();
     let bridge = robot_bridge::start(&robot_bridge::Config {
-        backend: robot_bridge::BackendKind::Ur,
-        robot_host: "127.0.0.1".to_owned(),
-        rtde_port: port,
-        fri_port: 30200,
+        backend: robot_bridge::BackendConfig::Ur(robot_bridge::backend::ur::UrConfig {
+            robot_host: "127.0.0.1".to_owned(),
+            rtde_port: port,
+        }),
         rep: "tcp://127.0.0.1:*".to_owned(),
         publish: "tcp://127.0.0.1:*".to_owned(),
     })
@@ -312,10 +312,10 @@ fn a_bridge_restart_mid_session_is_recovered() {
     .unwrap();
     let port = sim.rtde_port().unwrap();
     let bridge_config = |rep: &str, publish: &str| robot_bridge::Config {
-        backend: robot_bridge::BackendKind::Ur,
-        robot_host: "127.0.0.1".to_owned(),
-        rtde_port: port,
-        fri_port: 30200,
+        backend: robot_bridge::BackendConfig::Ur(robot_bridge::backend::ur::UrConfig {
+            robot_host: "127.0.0.1".to_owned(),
+            rtde_port: port,
+        }),
         rep: rep.to_owned(),
         publish: publish.to_owned(),
     };

@@ -1,5 +1,6 @@
 //! robot-bridge: the thesis's "ROS to IPS link" without ROS. It keeps a connection to the robot
-//! controller through a back end ([`backend::Backend`]) and serves two ZeroMQ sockets:
+//! controller through a back end ([`backend::Backend`], chosen and configured by
+//! [`BackendConfig`]) and serves two ZeroMQ sockets:
 //!
 //! - instruction REP (default `tcp://*:2000`): `start` / `stop` mirroring with the thesis's
 //!   messages and acks, and `status`. Mirroring is one switch shared by all clients, as in the
@@ -13,22 +14,10 @@
 //! `status` says `"lost"` or `"connecting"` and `start` is refused with the reason.
 
 pub mod backend;
+mod controller;
+mod instructions;
 mod service;
 
-pub use service::{Config, Handle, run, start};
-
-/// Which controller protocol the bridge speaks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BackendKind {
-    Ur,
-    Iiwa,
-}
-
-impl BackendKind {
-    pub fn name(self) -> &'static str {
-        match self {
-            BackendKind::Ur => "ur",
-            BackendKind::Iiwa => "iiwa",
-        }
-    }
-}
+pub use backend::{BackendConfig, BackendKind};
+pub use instructions::MAX_REQUEST_BYTES;
+pub use service::{BridgeError, Config, Handle, run, start};

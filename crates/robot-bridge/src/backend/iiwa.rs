@@ -25,12 +25,45 @@ use std::time::{Duration, Instant};
 
 use kuka_fri::{CommandMessage, MAX_MESSAGE_BYTES, MonitoringMessage, SessionState, encode};
 
-use super::{Backend, Event, LinkState, Sample};
+use protocol::RobotSide;
+
+use super::{Backend, BackendKind, BackendSettings, Event, LinkState, OpenError, Sample};
 
 /// Send periods of silence after which the controller counts as lost.
 pub const SILENT_PERIODS: u32 = 3;
 /// Assumed until the controller states its send period.
 const DEFAULT_SEND_PERIOD: Duration = Duration::from_millis(5);
+/// The UDP port Sunrise's FRI sends to by default.
+pub const DEFAULT_FRI_PORT: u16 = 30200;
+
+/// Where the iiwa's FRI messages come from and are received.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IiwaConfig {
+    /// The controller's address; only its datagrams are accepted.
+    pub robot_host: String,
+    /// The UDP port to receive on; 0 picks a free one.
+    pub fri_port: u16,
+}
+
+impl BackendSettings for IiwaConfig {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Iiwa
+    }
+
+    fn robot_side(&self) -> RobotSide {
+        RobotSide::IiwaDrive
+    }
+
+    fn open(&self) -> Result<Box<dyn Backend>, OpenError> {
+        let backend = IiwaBackend::bind(&self.robot_host, self.fri_port).map_err(|source| {
+            OpenError::FriListen {
+                port: self.fri_port,
+                source,
+            }
+        })?;
+        Ok(Box::new(backend))
+    }
+}
 
 /// A monitoring message as the receiver thread got it.
 struct Received {
@@ -325,6 +358,10 @@ impl Backend for IiwaBackend {
                 }
             }
         }
+    }
+
+    fn controller_endpoint(&self) -> Option<String> {
+        Some(format!("udp://{}", self.local_address))
     }
 
     fn rejected_datagrams(&self) -> Option<(u64, Option<String>)> {

@@ -1,9 +1,18 @@
-//! Controller back ends: each turns a controller's own protocol into [`Sample`]s.
+//! Controller back ends: each turns a controller's own protocol into [`Event`]s. A back end is a
+//! module owning its settings (a type implementing [`BackendSettings`]) and its connection (a
+//! type implementing [`Backend`]); [`BackendConfig`] lists them, and is the only place that does.
+//!
+//! Adding a robot brand: a module here (settings, connection), a [`BackendKind`] and a
+//! [`BackendConfig`] variant, its flags in `src/bin/robot-bridge.rs`, and a test file with a
+//! `Cell` for it and the line `conformance!(BrandCell);` (see `tests/conformance/mod.rs`).
 
+pub mod dummy;
 pub mod iiwa;
 pub mod ur;
 
 use std::time::Duration;
+
+use protocol::RobotSide;
 
 /// One joint-state sample from the controller.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,5 +54,74 @@ pub trait Backend: Send {
     /// (datagram protocols only).
     fn rejected_datagrams(&self) -> Option<(u64, Option<String>)> {
         None
+    }
+    /// Where the controller's messages are received, for protocols where the controller
+    /// connects to the bridge (FRI): e.g. "udp://0.0.0.0:30200".
+    fn controller_endpoint(&self) -> Option<String> {
+        None
+    }
+}
+
+/// Which controller protocol the bridge speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendKind {
+    Ur,
+    Iiwa,
+    Dummy,
+}
+
+impl BackendKind {
+    /// The name in the status reply's `backend` field and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Ur => "ur",
+            BackendKind::Iiwa => "iiwa",
+            BackendKind::Dummy => "dummy",
+        }
+    }
+}
+
+/// A back end's settings: which protocol it is, the side name its robot has in the thesis's
+/// messages, and how to open the connection.
+pub trait BackendSettings {
+    fn kind(&self) -> BackendKind;
+    /// `"ros"` for UR (the thesis's ROS link), `"IiwaDrive"` for iiwa.
+    fn robot_side(&self) -> RobotSide;
+    /// Opens the connection; from then on the back end connects and reconnects by itself, so
+    /// only a local failure (a port that cannot be bound) is an error.
+    fn open(&self) -> Result<Box<dyn Backend>, OpenError>;
+}
+
+/// A failure to open a back end.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    #[error("cannot listen for FRI on UDP port {port}: {source}")]
+    FriListen { port: u16, source: std::io::Error },
+}
+
+/// The back end to run, with its own settings.
+#[derive(Debug, Clone)]
+pub enum BackendConfig {
+    Ur(ur::UrConfig),
+    Iiwa(iiwa::IiwaConfig),
+    Dummy(dummy::DummyConfig),
+}
+
+impl BackendConfig {
+    /// The one dispatch over back ends: everything else goes through [`BackendSettings`].
+    pub fn settings(&self) -> &dyn BackendSettings {
+        match self {
+            BackendConfig::Ur(config) => config,
+            BackendConfig::Iiwa(config) => config,
+            BackendConfig::Dummy(config) => config,
+        }
+    }
+
+    pub fn kind(&self) -> BackendKind {
+        self.settings().kind()
+    }
+
+    pub fn robot_side(&self) -> RobotSide {
+        self.settings().robot_side()
     }
 }

@@ -11,7 +11,9 @@ use ur_rtde::{
     Package, RtdeError, ValueType, decode_values, package, parse_setup_reply, setup_outputs_request,
 };
 
-use super::{Backend, Event, Sample};
+use protocol::RobotSide;
+
+use super::{Backend, BackendKind, BackendSettings, Event, OpenError, Sample};
 
 const RECIPE: [&str; 7] = [
     "timestamp",
@@ -25,6 +27,29 @@ const RECIPE: [&str; 7] = [
 
 /// Silence after which the controller counts as lost.
 pub const SILENCE_LIMIT: Duration = Duration::from_secs(2);
+/// The controller's RTDE port.
+pub const DEFAULT_RTDE_PORT: u16 = 30004;
+
+/// Where the UR controller is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UrConfig {
+    pub robot_host: String,
+    pub rtde_port: u16,
+}
+
+impl BackendSettings for UrConfig {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Ur
+    }
+
+    fn robot_side(&self) -> RobotSide {
+        RobotSide::Ros
+    }
+
+    fn open(&self) -> Result<Box<dyn Backend>, OpenError> {
+        Ok(Box::new(UrBackend::new(&self.robot_host, self.rtde_port)))
+    }
+}
 
 pub struct UrBackend {
     address: String,

@@ -2,31 +2,92 @@ use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use clap::Parser;
-use robot_bridge::{BackendKind, Config};
+use clap::{Parser, ValueEnum};
+use robot_bridge::backend::iiwa::{DEFAULT_FRI_PORT, IiwaConfig};
+use robot_bridge::backend::ur::{DEFAULT_RTDE_PORT, UrConfig};
+use robot_bridge::{BackendConfig, Config};
 
 /// Mirrors a cobot controller's joint states onto the thesis's ZeroMQ sockets.
 #[derive(Debug, Parser)]
 #[command(name = "robot-bridge", version)]
 struct Args {
     /// Controller protocol: ur (RTDE client) or iiwa (FRI monitoring client).
-    #[arg(long)]
-    backend: String,
+    #[arg(long, value_parser = parse_backend)]
+    backend: BackendChoice,
     /// Controller address (iiwa: only its FRI datagrams are accepted).
     #[arg(long)]
     robot_host: String,
-    /// RTDE port of a UR controller.
-    #[arg(long, default_value_t = 30004)]
-    rtde_port: u16,
-    /// UDP port to receive FRI monitoring messages on (iiwa); 0 picks a free one.
-    #[arg(long, default_value_t = 30200)]
-    fri_port: u16,
     /// Instruction socket (REP).
     #[arg(long, default_value = "tcp://*:2000")]
     rep: String,
     /// Hardware-state socket (PUB).
     #[arg(long = "pub", default_value = "tcp://*:3000")]
     publish: String,
+    // Each back end's own options, under its own heading in --help; a back end ignores the
+    // others' (their defaults), as before.
+    #[command(flatten)]
+    ur: UrArgs,
+    #[command(flatten)]
+    iiwa: IiwaArgs,
+}
+
+/// The back ends a controller can be reached with from the command line.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum BackendChoice {
+    Ur,
+    Iiwa,
+}
+
+#[derive(Debug, clap::Args)]
+#[command(next_help_heading = "UR (--backend ur)")]
+struct UrArgs {
+    /// RTDE port of a UR controller.
+    #[arg(long, default_value_t = DEFAULT_RTDE_PORT)]
+    rtde_port: u16,
+}
+
+#[derive(Debug, clap::Args)]
+#[command(next_help_heading = "KUKA iiwa (--backend iiwa)")]
+struct IiwaArgs {
+    /// UDP port to receive FRI monitoring messages on; 0 picks a free one.
+    #[arg(long, default_value_t = DEFAULT_FRI_PORT)]
+    fri_port: u16,
+}
+
+/// As clap's own parser, with the reason users of earlier versions know.
+fn parse_backend(name: &str) -> Result<BackendChoice, String> {
+    BackendChoice::from_str(name, false).map_err(|_| {
+        let known: Vec<String> = BackendChoice::value_variants()
+            .iter()
+            .filter_map(ValueEnum::to_possible_value)
+            .map(|value| value.get_name().to_owned())
+            .collect();
+        format!(
+            "unknown back end '{name}' (expected {})",
+            known.join(" or ")
+        )
+    })
+}
+
+impl Args {
+    fn into_config(self) -> Config {
+        let robot_host = self.robot_host;
+        let backend = match self.backend {
+            BackendChoice::Ur => BackendConfig::Ur(UrConfig {
+                robot_host,
+                rtde_port: self.ur.rtde_port,
+            }),
+            BackendChoice::Iiwa => BackendConfig::Iiwa(IiwaConfig {
+                robot_host,
+                fri_port: self.iiwa.fri_port,
+            }),
+        };
+        Config {
+            backend,
+            rep: self.rep,
+            publish: self.publish,
+        }
+    }
 }
 
 fn main() -> ExitCode {
@@ -44,22 +105,7 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let backend = match args.backend.as_str() {
-        "ur" => BackendKind::Ur,
-        "iiwa" => BackendKind::Iiwa,
-        other => {
-            eprintln!("robot-bridge: unknown back end '{other}' (expected ur or iiwa)");
-            return ExitCode::from(2);
-        }
-    };
-    let config = Config {
-        backend,
-        robot_host: args.robot_host,
-        rtde_port: args.rtde_port,
-        fri_port: args.fri_port,
-        rep: args.rep,
-        publish: args.publish,
-    };
+    let config = args.into_config();
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         if let Err(error) = signal_hook::flag::register(signal, Arc::clone(&stop)) {

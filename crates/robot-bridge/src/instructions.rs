@@ -1,0 +1,104 @@
+//! The instruction server: owns the REP socket and answers `start`, `stop` and `status` with
+//! the thesis's acks; anything else gets an error ack with a reason.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use protocol::{Command, RobotSide, StatusBody};
+
+use crate::controller::ControllerState;
+use crate::service::Shared;
+
+/// Requests larger than this are refused unread (a JSON instruction is ~100 bytes).
+pub const MAX_REQUEST_BYTES: usize = 64 * 1024;
+
+/// Who the bridge is in its replies.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Identity {
+    /// The status reply's `backend` value.
+    pub(crate) backend_name: &'static str,
+    pub(crate) robot_side: RobotSide,
+}
+
+pub(crate) fn instruction_loop(
+    socket: zmq::Socket,
+    shared: Arc<Shared>,
+    stop: Arc<AtomicBool>,
+    identity: Identity,
+) {
+    while !stop.load(Ordering::Relaxed) {
+        let request = match socket.recv_bytes(0) {
+            Ok(request) => request,
+            Err(zmq::Error::EAGAIN) => continue,
+            Err(_) => return,
+        };
+        // A REQ client may send a multi-part message: drain it so the reply goes out.
+        while socket.get_rcvmore().unwrap_or(false) {
+            let _ = socket.recv_bytes(0);
+        }
+        let reply = answer(&request, &shared, identity);
+        let _ = socket.send(reply.as_bytes(), 0);
+    }
+}
+
+fn answer(request: &[u8], shared: &Shared, identity: Identity) -> String {
+    let robot_side = identity.robot_side;
+    let error = |reason: String| {
+        protocol::to_json(&protocol::ack_error(robot_side, reason)).unwrap_or_default()
+    };
+    if request.len() > MAX_REQUEST_BYTES {
+        return error(format!(
+            "request of {} bytes exceeds the {MAX_REQUEST_BYTES}-byte limit",
+            request.len()
+        ));
+    }
+    let parsed = match protocol::parse_request(request) {
+        Ok(parsed) => parsed,
+        Err(reason) => return error(reason.to_string()),
+    };
+    let controller = shared.controller.lock().unwrap_or_else(|p| p.into_inner());
+    match parsed.command {
+        Command::Start => {
+            if controller.state != ControllerState::Connected {
+                let why = controller
+                    .reason
+                    .clone()
+                    .unwrap_or_else(|| "not connected yet".to_owned());
+                return error(format!("controller {}: {why}", controller.state.name()));
+            }
+            shared.mirroring.store(true, Ordering::Relaxed);
+            protocol::to_json(&protocol::ack_ok(robot_side)).unwrap_or_default()
+        }
+        Command::Stop => {
+            shared.mirroring.store(false, Ordering::Relaxed);
+            protocol::to_json(&protocol::ack_ok(robot_side)).unwrap_or_default()
+        }
+        Command::Status => {
+            let body = StatusBody {
+                backend: identity.backend_name.to_owned(),
+                controller: controller.state.name().to_owned(),
+                mirroring: shared.mirroring.load(Ordering::Relaxed),
+                sample_rate_hz: controller.recent.len() as f64,
+                last_sample_age_s: controller.last_sample.map(|t| t.elapsed().as_secs_f64()),
+                published: shared.published.load(Ordering::Relaxed),
+                reconnects: controller.reconnects,
+                reason: controller.reason.clone(),
+                controller_samples_missed: controller
+                    .counts_controller_seq
+                    .then_some(controller.controller_samples_missed),
+                session_state: controller
+                    .link
+                    .as_ref()
+                    .and_then(|link| link.session_state)
+                    .map(str::to_owned),
+                connection_quality: controller
+                    .link
+                    .as_ref()
+                    .and_then(|link| link.quality)
+                    .map(str::to_owned),
+                rejected_datagrams: controller.rejected_datagrams,
+            };
+            protocol::to_json(&protocol::status(robot_side, body)).unwrap_or_default()
+        }
+    }
+}
