@@ -44,11 +44,6 @@ pub fn matrix_rows(pose: &Isometry3<f64>) -> [[f64; 4]; 4] {
     std::array::from_fn(|row| std::array::from_fn(|col| m[(row, col)]))
 }
 
-/// Angle of the rotation taking `a` to `b`, in [0, pi].
-pub fn rotation_angle_between(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
-    a.angle_to(b)
-}
-
 /// Rotation-vector (axis times angle) error that turns `current` into `target`, in the frame both
 /// are expressed in: `exp([e]x) * current = target`.
 pub fn rotation_error(current: &UnitQuaternion<f64>, target: &UnitQuaternion<f64>) -> Vector3<f64> {

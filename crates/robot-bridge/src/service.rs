@@ -154,14 +154,12 @@ pub fn start(config: &Config) -> Result<Handle, BridgeError> {
 /// Runs until `shutdown` is set (the binary sets it on SIGINT/SIGTERM).
 pub fn run(
     config: &Config,
-    shutdown: &AtomicBool,
     on_ready: impl FnOnce(&Handle),
+    shutdown: impl FnOnce(),
 ) -> Result<(), BridgeError> {
     let handle = start(config)?;
     on_ready(&handle);
-    while !shutdown.load(Ordering::Relaxed) {
-        thread::sleep(Duration::from_millis(50));
-    }
+    shutdown();
     handle.stop();
     Ok(())
 }

@@ -1,11 +1,11 @@
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use clap::{Parser, ValueEnum};
 use robot_bridge::backend::iiwa::{DEFAULT_FRI_PORT, IiwaConfig};
 use robot_bridge::backend::ur::{DEFAULT_RTDE_PORT, UrConfig};
 use robot_bridge::{BackendConfig, Config};
+use signal_hook::consts::{SIGINT, SIGTERM};
+use signal_hook::iterator::Signals;
 
 /// Mirrors a cobot controller's joint states onto the thesis's ZeroMQ sockets.
 #[derive(Debug, Parser)]
@@ -106,14 +106,14 @@ fn main() -> ExitCode {
         }
     };
     let config = args.into_config();
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        if let Err(error) = signal_hook::flag::register(signal, Arc::clone(&stop)) {
+    let mut signals = match Signals::new([SIGINT, SIGTERM]) {
+        Ok(signals) => signals,
+        Err(error) => {
             eprintln!("robot-bridge: cannot handle signals: {error}");
             return ExitCode::from(1);
         }
-    }
-    let result = robot_bridge::run(&config, &stop, |handle| match &handle.controller_endpoint {
+    };
+    let ready = |handle: &robot_bridge::Handle| match &handle.controller_endpoint {
         Some(controller) => println!(
             "READY rep={} pub={} fri={controller}",
             handle.rep_endpoint, handle.pub_endpoint
@@ -122,6 +122,10 @@ fn main() -> ExitCode {
             "READY rep={} pub={}",
             handle.rep_endpoint, handle.pub_endpoint
         ),
+    };
+    // Blocks until SIGINT or SIGTERM.
+    let result = robot_bridge::run(&config, ready, || {
+        signals.forever().next();
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,
