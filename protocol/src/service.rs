@@ -175,8 +175,17 @@ pub fn parse_service_request(bytes: &[u8]) -> Result<ServiceRequest, ProtocolErr
         return Err(ProtocolError::UnknownServiceCommand(name.to_owned()));
     }
     let name = name.to_owned();
-    let request: ServiceRequest = serde_json::from_value(value)
-        .map_err(|error| ProtocolError::Shape(format!("{name}: {error}")))?;
+    let request: ServiceRequest = serde_json::from_value(value).map_err(|error| {
+        let message = error.to_string();
+        // "missing field `path`" says less than which request needs it.
+        match message
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.split_once('`'))
+        {
+            Some((field, _)) => ProtocolError::Shape(format!("{name} needs a '{field}'")),
+            None => ProtocolError::Shape(format!("{name}: {message}")),
+        }
+    })?;
     request.validate()?;
     Ok(request)
 }

@@ -253,7 +253,7 @@ fn service_requests_are_typed_by_their_command() {
         parse(&envelope(r#"{"command":"save"}"#))
             .unwrap_err()
             .to_string(),
-        "the message does not have the expected shape: save: missing field `path`"
+        "the message does not have the expected shape: save needs a 'path'"
     );
     assert!(
         parse(&envelope(r#"{"command":7}"#))

@@ -1,57 +1,14 @@
-//! Helpers for cross-service tests: building and spawning the project's binaries, reading their
-//! `READY` line (bounded by a timeout, never a sleep), stopping them with SIGTERM, and the
-//! Python venv third-party clients run from.
+//! Helpers for cross-service tests: the `cell` crate's launcher (the one `ips demo` uses) with
+//! panicking shorthands, and the Python venv third-party clients run from.
 
-use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::Command;
 use std::time::Duration;
 
-/// A spawned service, killed when dropped.
-#[derive(Debug)]
-pub struct Service {
-    pub child: Child,
-    /// `key=value` pairs of its READY line.
-    pub endpoints: Vec<(String, String)>,
-}
+pub use cell::{Cell, ChildProcess as Service};
 
-impl Service {
-    pub fn endpoint(&self, key: &str) -> &str {
-        self.endpoints
-            .iter()
-            .find(|(k, _)| k == key)
-            .map(|(_, v)| v.as_str())
-            .unwrap_or_else(|| panic!("no '{key}' in the READY line {:?}", self.endpoints))
-    }
-
-    /// Sends SIGTERM and returns the exit status, waiting at most `within`.
-    pub fn terminate(mut self, within: Duration) -> Option<std::process::ExitStatus> {
-        let _ = Command::new("kill")
-            .arg("-TERM")
-            .arg(self.child.id().to_string())
-            .status();
-        let deadline = std::time::Instant::now() + within;
-        loop {
-            if let Ok(Some(status)) = self.child.try_wait() {
-                return Some(status);
-            }
-            if std::time::Instant::now() > deadline {
-                return None;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Service {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// Path of a binary of this workspace, next to the test executable's profile directory.
+/// Path of a binary of this workspace, next to the test executable's profile directory (it may
+/// not exist yet: [`ensure_binaries`] builds it).
 pub fn binary(name: &str) -> PathBuf {
     let mut path = std::env::current_exe().expect("test executable path");
     path.pop();
@@ -69,39 +26,17 @@ pub fn spawn(program: PathBuf, args: &[&str], within: Duration) -> Service {
 /// As [`spawn`], but a program that exits or stays silent is reported (and killed), not a
 /// panic: for callers that retry, e.g. with another address.
 pub fn try_spawn(program: PathBuf, args: &[&str], within: Duration) -> Result<Service, String> {
-    let mut child = Command::new(&program)
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|error| format!("cannot spawn {}: {error}", program.display()))?;
-    let stdout = child.stdout.take().expect("piped stdout");
-    let (sender, receiver) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if line.starts_with("READY") {
-                let _ = sender.send(line);
-            }
-        }
-    });
-    // The reader drops the sender when stdout closes, so an early exit ends the wait at once.
-    let Ok(line) = receiver.recv_timeout(within) else {
-        let _ = child.kill();
-        let status = child.wait();
-        return Err(format!(
-            "{} {args:?} printed no READY line within {within:?} (exit: {status:?})",
-            program.display()
-        ));
-    };
-    let endpoints = line
-        .split_whitespace()
-        .skip(1)
-        .filter_map(|pair| {
-            pair.split_once('=')
-                .map(|(k, v)| (k.to_owned(), v.to_owned()))
-        })
-        .collect();
-    Ok(Service { child, endpoints })
+    let name = program.file_name().map_or_else(
+        || program.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let args: Vec<String> = args.iter().map(|a| (*a).to_owned()).collect();
+    cell::spawn(&name, &program, &args, within).map_err(|error| format!("{error} (args {args:?})"))
+}
+
+/// sim-robot as `robot` and a bridge for it, on free ports, as `ips demo` starts them.
+pub fn start_cell(robot: align_core::robots::ShippedRobot) -> Cell {
+    Cell::start(robot).unwrap_or_else(|error| panic!("{error}"))
 }
 
 /// The workspace root.
@@ -109,27 +44,9 @@ pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// `cargo test -p system-tests` does not build other packages' binaries: build the workspace's.
-/// Always, not only when missing: a binary left from before a source change would be tested
-/// instead of the code in the tree (cargo makes this a quick no-op when they are fresh).
+/// Builds the workspace's binaries (`cargo test -p system-tests` alone does not).
 pub fn ensure_binaries() {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
-    let mut command = Command::new(cargo);
-    // The profile these tests were built with, so that the build reuses their artifacts (a
-    // plain `cargo build` would compile every dependency again for the dev profile) and the
-    // binaries land next to the tests.
-    let release = binary("").components().any(|c| c.as_os_str() == "release");
-    let profile = if release { "release" } else { "test" };
-    // Every binary of the workspace, features unified as `cargo test --workspace` unifies them:
-    // building only some packages could pick other features and recompile shared dependencies.
-    command
-        .args(["build", "--profile", profile, "--workspace", "--bins"])
-        .current_dir(repo_root());
-    let status = command.status().expect("cargo runs");
-    assert!(
-        status.success(),
-        "cargo build of the workspace binaries failed"
-    );
+    cell::build_workspace_binaries(&repo_root()).unwrap_or_else(|error| panic!("{error}"));
 }
 
 /// The venv's Python after `scripts/python-env.sh` made sure its clients are installed. Its

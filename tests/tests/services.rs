@@ -8,49 +8,21 @@
 use std::process::Command;
 use std::time::Duration;
 
-use system_tests::{binary, ensure_binaries, python, repo_root, spawn};
+use align_core::robots::ShippedRobot;
+use system_tests::{Cell, binary, ensure_binaries, python, repo_root, spawn, start_cell};
 
 #[test]
 fn binaries_serve_a_pyzmq_client_and_exit_cleanly_on_sigterm() {
     ensure_binaries();
-    let sim = spawn(
-        binary("sim-robot"),
-        &[
-            "--robot",
-            "ur10",
-            "--rtde-host",
-            "127.0.0.1",
-            "--rtde-port",
-            "0",
-            "--control",
-            "tcp://127.0.0.1:*",
-        ],
-        Duration::from_secs(20),
-    );
-    let port = sim.endpoint("rtde").rsplit(':').next().unwrap().to_owned();
-    let bridge = spawn(
-        binary("robot-bridge"),
-        &[
-            "--backend",
-            "ur",
-            "--robot-host",
-            "127.0.0.1",
-            "--rtde-port",
-            &port,
-            "--rep",
-            "tcp://127.0.0.1:*",
-            "--pub",
-            "tcp://127.0.0.1:*",
-        ],
-        Duration::from_secs(20),
-    );
+    // The UR cell exactly as `ips demo` starts it.
+    let Cell { sim, bridge } = start_cell(ShippedRobot::Ur10);
     let output = Command::new(python())
         .arg(repo_root().join("examples/python/mirror_joint_states.py"))
         .args([
             "--rep",
-            bridge.endpoint("rep"),
+            bridge.endpoint("rep").unwrap(),
             "--pub",
-            bridge.endpoint("pub"),
+            bridge.endpoint("pub").unwrap(),
             "--count",
             "25",
             "--json",
@@ -105,12 +77,7 @@ fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
         ],
         Duration::from_secs(20),
     );
-    let fri_port = bridge
-        .endpoint("fri")
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .to_owned();
+    let fri_port = bridge.port("fri").unwrap();
     let sim = spawn(
         binary("sim-robot"),
         &[
@@ -125,14 +92,14 @@ fn iiwa_binaries_mirror_over_fri_to_a_pyzmq_client() {
         ],
         Duration::from_secs(20),
     );
-    assert!(sim.endpoint("fri_target").ends_with(&fri_port));
+    assert!(sim.endpoint("fri_target").unwrap().ends_with(&fri_port));
     let output = Command::new(python())
         .arg(repo_root().join("examples/python/mirror_joint_states.py"))
         .args([
             "--rep",
-            bridge.endpoint("rep"),
+            bridge.endpoint("rep").unwrap(),
             "--pub",
-            bridge.endpoint("pub"),
+            bridge.endpoint("pub").unwrap(),
             "--robot-side",
             "IiwaDrive",
             "--count",

@@ -8,8 +8,9 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
+use align_core::robots::ShippedRobot;
 use serde_json::{Value, json};
-use system_tests::{Service, binary, spawn};
+use system_tests::{Cell, Service, binary, spawn, start_cell};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -26,11 +27,11 @@ fn python_session(
         .arg(root().join("examples/python/full_session.py"))
         .args([
             "--service",
-            service.endpoint("rep"),
+            service.endpoint("rep").unwrap(),
             "--sim-control",
-            sim.endpoint("control"),
+            sim.endpoint("control").unwrap(),
             "--bridge-pub",
-            bridge.endpoint("pub"),
+            bridge.endpoint("pub").unwrap(),
         ])
         .arg("--plan")
         .arg(root().join("examples/step_block_ur10/session.json"))
@@ -69,37 +70,8 @@ fn session_survives_sigkill_and_aligns_to_the_truth() {
     std::fs::write(&session, template.to_string()).unwrap();
     let journal = folder.join("cell.journal");
 
-    let sim = spawn(
-        binary("sim-robot"),
-        &[
-            "--robot",
-            "ur10",
-            "--rtde-host",
-            "127.0.0.1",
-            "--rtde-port",
-            "0",
-            "--control",
-            "tcp://127.0.0.1:*",
-        ],
-        Duration::from_secs(20),
-    );
-    let port = sim.endpoint("rtde").rsplit(':').next().unwrap().to_owned();
-    let bridge = spawn(
-        binary("robot-bridge"),
-        &[
-            "--backend",
-            "ur",
-            "--robot-host",
-            "127.0.0.1",
-            "--rtde-port",
-            &port,
-            "--rep",
-            "tcp://127.0.0.1:*",
-            "--pub",
-            "tcp://127.0.0.1:*",
-        ],
-        Duration::from_secs(20),
-    );
+    // The UR cell exactly as `ips demo` starts it.
+    let Cell { sim, bridge } = start_cell(ShippedRobot::Ur10);
     let serve_args = |journal: &PathBuf| -> Vec<String> {
         [
             "serve",
@@ -110,9 +82,9 @@ fn session_survives_sigkill_and_aligns_to_the_truth() {
             "--rep",
             "tcp://127.0.0.1:*",
             "--bridge-rep",
-            bridge.endpoint("rep"),
+            bridge.endpoint("rep").unwrap(),
             "--bridge-pub",
-            bridge.endpoint("pub"),
+            bridge.endpoint("pub").unwrap(),
         ]
         .map(str::to_owned)
         .to_vec()

@@ -112,7 +112,7 @@ fn ur_rtde_receive_interface_reads_the_simulated_joints_and_clock() {
     socket.set_linger(0).unwrap();
     socket.set_rcvtimeo(10_000).unwrap();
     socket.set_sndtimeo(10_000).unwrap();
-    socket.connect(sim.endpoint("control")).unwrap();
+    socket.connect(sim.endpoint("control").unwrap()).unwrap();
     control(
         &socket,
         json!({"command": "motion", "motion": {"kind": "hold", "q": HOLD_Q}}),

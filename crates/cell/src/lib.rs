@@ -29,6 +29,8 @@ pub enum CellError {
     },
     #[error("{name} printed no '{key}' endpoint")]
     NoEndpoint { name: String, key: String },
+    #[error("cargo build of the workspace binaries failed ({status})")]
+    Build { status: ExitStatus },
     #[error("{name} exited early ({status})")]
     Exited { name: String, status: ExitStatus },
 }
@@ -176,6 +178,39 @@ pub fn spawn(
         })
         .collect();
     Ok(process)
+}
+
+/// Builds every binary of the workspace at `workspace_root`, for tests: `cargo test -p X` does
+/// not build other packages' binaries, and one left from before a source change would be tested
+/// instead of the code in the tree (cargo makes this a quick no-op when they are fresh). The
+/// profile is the running executable's (`release` or the tests' own), so the build reuses its
+/// artifacts and the binaries land next to it; every binary at once, so features unify as in
+/// `cargo test --workspace` and shared dependencies are not compiled again.
+pub fn build_workspace_binaries(workspace_root: &Path) -> Result<(), CellError> {
+    let here = std::env::current_exe().map_err(|source| CellError::Spawn {
+        name: "cargo".to_owned(),
+        source,
+    })?;
+    let release = here.components().any(|c| c.as_os_str() == "release");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    let status = Command::new(cargo)
+        .args([
+            "build",
+            "--profile",
+            if release { "release" } else { "test" },
+        ])
+        .args(["--workspace", "--bins"])
+        .current_dir(workspace_root)
+        .status()
+        .map_err(|source| CellError::Spawn {
+            name: "cargo".to_owned(),
+            source,
+        })?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(CellError::Build { status })
+    }
 }
 
 /// How long a service may take to print READY.

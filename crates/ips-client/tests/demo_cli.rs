@@ -5,20 +5,9 @@
 use std::process::Command;
 
 /// The demo starts the sibling binaries; `cargo test -p ips-client` alone does not build them.
-/// Always asks cargo (a no-op when they are current): an existing binary may be stale.
 fn ensure_services_built() {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
-    // The tests' own profile: the build reuses their artifacts and puts the binaries next to
-    // `ips` (a plain `cargo build` would compile every dependency again for the dev profile).
-    let ips = std::path::PathBuf::from(env!("CARGO_BIN_EXE_ips"));
-    let release = ips.components().any(|c| c.as_os_str() == "release");
-    let profile = if release { "release" } else { "test" };
-    let status = Command::new(cargo)
-        .args(["build", "--profile", profile, "--workspace", "--bins"])
-        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-        .status()
-        .unwrap();
-    assert!(status.success());
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    cell::build_workspace_binaries(&root).unwrap();
 }
 
 /// Runs `ips demo ARGS` (which must include --json), which must succeed, and returns its document.

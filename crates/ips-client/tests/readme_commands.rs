@@ -45,20 +45,7 @@ fn readme_has_exactly_two_setup_commands_and_ci_runs_the_test_command() {
 
 /// The services the demo starts sit next to `ips`: build them with the tests' own profile.
 fn ensure_services_built() {
-    let ips = PathBuf::from(env!("CARGO_BIN_EXE_ips"));
-    let release = ips.components().any(|c| c.as_os_str() == "release");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
-    let status = Command::new(cargo)
-        .args([
-            "build",
-            "--profile",
-            if release { "release" } else { "test" },
-        ])
-        .args(["--workspace", "--bins"])
-        .current_dir(repo_root())
-        .status()
-        .expect("cargo runs");
-    assert!(status.success());
+    cell::build_workspace_binaries(&repo_root()).expect("the workspace binaries build");
 }
 
 #[test]

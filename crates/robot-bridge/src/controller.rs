@@ -2,13 +2,20 @@
 //! record the status reply reads, and hands samples to the publisher.
 
 use std::collections::VecDeque;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::Sender;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crate::backend::{Backend, Event, LinkState, Sample};
-use crate::service::Shared;
+
+/// What the threads share.
+pub(crate) struct Shared {
+    /// One switch for all clients, as in the thesis.
+    pub(crate) mirroring: AtomicBool,
+    pub(crate) published: AtomicU64,
+    pub(crate) controller: Mutex<ControllerRecord>,
+}
 
 /// The controller link as the status reply names it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -6,8 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use protocol::{Command, RobotSide, StatusBody};
 
-use crate::controller::ControllerState;
-use crate::service::Shared;
+use crate::controller::{ControllerState, Shared};
 
 /// Requests larger than this are refused unread (a JSON instruction is ~100 bytes).
 pub const MAX_REQUEST_BYTES: usize = 64 * 1024;

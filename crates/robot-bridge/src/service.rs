@@ -11,7 +11,7 @@ use std::time::Duration;
 use protocol::{HwStateBody, RobotSide};
 
 use crate::backend::{BackendConfig, OpenError, Sample};
-use crate::controller::{ControllerRecord, backend_loop};
+use crate::controller::{ControllerRecord, Shared, backend_loop};
 use crate::instructions::{Identity, MAX_REQUEST_BYTES, instruction_loop};
 
 #[derive(Debug, Clone)]
@@ -33,14 +33,6 @@ pub enum BridgeError {
         endpoint: String,
         source: zmq::Error,
     },
-}
-
-/// What the threads share.
-pub(crate) struct Shared {
-    /// One switch for all clients, as in the thesis.
-    pub(crate) mirroring: AtomicBool,
-    pub(crate) published: AtomicU64,
-    pub(crate) controller: Mutex<ControllerRecord>,
 }
 
 /// A running bridge with its bound endpoints.

@@ -15,6 +15,7 @@ use protocol::{
     StatusReply,
 };
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 
 use super::journal::{Journal, highest_id};
 use super::samples::{JointSample, Samples};
@@ -153,8 +154,9 @@ impl Service {
         Ok(MirroringReply { mirroring })
     }
 
-    /// Sends one of the thesis's instructions to the bridge and returns its ack, or why not.
-    fn instruct(&self, to: RobotSide, command: Command) -> Result<protocol::Instruction, String> {
+    /// Sends one of the thesis's instructions to the bridge and returns its reply (an ack, or
+    /// for `status` the bridge's status), or why not.
+    fn instruct<T: DeserializeOwned>(&self, to: RobotSide, command: Command) -> Result<T, String> {
         let endpoint = &self.config.bridge_rep;
         let req =
             socket(&self.context, zmq::REQ, 2000, endpoint).map_err(|error| error.to_string())?;
@@ -166,23 +168,24 @@ impl Service {
         let reply = req
             .recv_bytes(0)
             .map_err(|_| format!("no answer from the bridge at {endpoint} within 2 s"))?;
-        serde_json::from_slice(&reply).map_err(|e| format!("bad ack from the bridge: {e}"))
+        serde_json::from_slice(&reply)
+            .map_err(|e| format!("bad {} reply from the bridge: {e}", command.name()))
     }
 
     /// Asks the bridge to start or stop mirroring, addressed as the bridge names itself: a UR
     /// bridge is the thesis's "ros", an iiwa bridge "IiwaDrive". The name is learnt once from
-    /// the bridge's status reply.
+    /// the `from` of the bridge's status reply.
     fn bridge(&mut self, command: Command) -> Result<(), String> {
         let side = match self.bridge_side {
             Some(side) => side,
             None => {
-                let status = self.instruct(RobotSide::Ros, Command::Status)?;
+                let status: protocol::Status = self.instruct(RobotSide::Ros, Command::Status)?;
                 let side = RobotSide::from_name(&status.header.from).unwrap_or(RobotSide::Ros);
                 self.bridge_side = Some(side);
                 side
             }
         };
-        let ack = self.instruct(side, command)?;
+        let ack: protocol::Instruction = self.instruct(side, command)?;
         if ack.body.content == "ok" {
             Ok(())
         } else {
