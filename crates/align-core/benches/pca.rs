@@ -63,7 +63,7 @@ fn pca(c: &mut Criterion) {
         cloud.len(),
         probe.keypoints,
         probe.kept,
-        probe.iterations
+        probe.alignment.iterations
     );
     for (label, parallel, starts) in [
         ("1 thread, local", false, 0),

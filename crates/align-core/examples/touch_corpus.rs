@@ -182,19 +182,19 @@ fn run_part(name: &str, mesh: &Mesh, part_index: u64, touches: usize, args: &Arg
             }
         };
         let same_pose = pose_distance(
-            &blind.base_from_part,
-            &optimum.base_from_part,
+            &blind.alignment.base_from_part,
+            &optimum.alignment.base_from_part,
             mesh.radius_m(),
         ) < 1e-3;
-        let same_rms = blind.rms_m <= optimum.rms_m * 1.01 + 1e-6;
+        let same_rms = blind.alignment.rms_m <= optimum.alignment.rms_m * 1.01 + 1e-6;
         if same_pose && same_rms {
             row.correct += 1;
         }
         if blind.is_ambiguous() {
             row.ambiguous += 1;
         }
-        row.rms_mm.push(blind.rms_m * 1e3);
-        row.optimum_rms_mm.push(optimum.rms_m * 1e3);
+        row.rms_mm.push(blind.alignment.rms_m * 1e3);
+        row.optimum_rms_mm.push(optimum.alignment.rms_m * 1e3);
         // The residual at the true pose (unsigned distance less the ball radius): the noise as
         // the touches carry it; an optimum well above it is a minimum the local search missed.
         let part_from_base = truth.inverse();
@@ -209,7 +209,7 @@ fn run_part(name: &str, mesh: &Mesh, part_index: u64, touches: usize, args: &Arg
             / set.touches.len() as f64;
         row.truth_rms_mm.push(truth_ms.sqrt() * 1e3);
         row.truth_error_mm
-            .push(pose_distance(&blind.base_from_part, &truth, mesh.radius_m()) * 1e3);
+            .push(pose_distance(&blind.alignment.base_from_part, &truth, mesh.radius_m()) * 1e3);
         row.time_s.push(elapsed);
     }
     row

@@ -119,6 +119,7 @@ fn aligned(cell: &Cell, samples: &[TouchSample]) -> Isometry3<f64> {
     let nominal = isometry_from_xyz_rpy([0.63, -0.24, 0.02], [0.0, 0.0, 0.33]);
     align_touches(&PsaTarget::new(&cell.mesh), &touches, &nominal, &options)
         .unwrap()
+        .alignment
         .base_from_part
 }
 

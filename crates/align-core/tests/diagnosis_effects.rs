@@ -274,6 +274,7 @@ fn aligned(cell: &Cell, samples: &[TouchSample]) -> Isometry3<f64> {
     let nominal = isometry_from_xyz_rpy([0.01, 0.01, 0.0], [0.0, 0.0, -0.02]) * cell.truth;
     align_touches(&PsaTarget::new(&cell.mesh), &touches, &nominal, &options)
         .unwrap()
+        .alignment
         .base_from_part
 }
 

@@ -69,11 +69,11 @@ fn noiseless_scans_recover_random_poses_within_200_mm_to_a_micrometre() {
             &random_displacement(&mut rng, delta, mesh.radius_m()),
         );
         let result = align_cloud(&mesh, &cloud, &start, delta, &PcaOptions::default()).unwrap();
-        let (position, rotation) = errors(&result.base_from_part, &truth);
+        let (position, rotation) = errors(&result.alignment.base_from_part, &truth);
         assert!(
             position < 1e-6 && rotation < 1e-6,
             "trial {trial}, delta {delta}: {position:e} m, {rotation:e} rad after {} iterations",
-            result.iterations
+            result.alignment.iterations
         );
     }
 }
@@ -98,7 +98,7 @@ fn pose_error_with_noise_is_of_the_order_the_noise_allows() {
             &random_displacement(&mut rng, 0.05, mesh.radius_m()),
         );
         let result = align_cloud(&mesh, &cloud, &start, 0.05, &PcaOptions::default()).unwrap();
-        let (position, rotation) = errors(&result.base_from_part, &truth);
+        let (position, rotation) = errors(&result.alignment.base_from_part, &truth);
         assert!(
             position < 1e-4 && rotation * mesh.radius_m() < 1e-4,
             "{position:e} m, {rotation:e} rad"
@@ -126,12 +126,12 @@ fn clutter_and_ten_percent_outliers_still_align_below_a_millimetre() {
                 ..PcaOptions::default()
             };
             let result = align_cloud(&mesh, &cloud, &start, 0.1, &options).unwrap();
-            let (position, rotation) = errors(&result.base_from_part, &truth);
+            let (position, rotation) = errors(&result.alignment.base_from_part, &truth);
             let d = position.hypot(rotation * mesh.radius_m());
             assert!(
                 d < 1e-3,
                 "{step:?}: pose distance {d:e} m after {} iterations",
-                result.iterations
+                result.alignment.iterations
             );
         }
     }

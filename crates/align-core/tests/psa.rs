@@ -148,9 +148,14 @@ fn noiseless_touches_recover_random_poses_within_200_mm_to_a_micrometre() {
             let start = displaced(&truth, &mesh, &mut rng, delta);
             let result =
                 align_touches(&target, &touches, &start, &options(TIP_RADIUS_M)).expect("aligns");
-            let position_error =
-                (result.base_from_part.translation.vector - truth.translation.vector).norm();
-            let rotation_error = result.base_from_part.rotation.angle_to(&truth.rotation);
+            let position_error = (result.alignment.base_from_part.translation.vector
+                - truth.translation.vector)
+                .norm();
+            let rotation_error = result
+                .alignment
+                .base_from_part
+                .rotation
+                .angle_to(&truth.rotation);
             if count == 9 {
                 assert!(
                     !result.is_ambiguous(),
@@ -172,7 +177,11 @@ fn noiseless_touches_recover_random_poses_within_200_mm_to_a_micrometre() {
                 position_error < 1e-6 && rotation_error < 1e-6,
                 "{count} touches, trial {trial}: {position_error:e} m, {rotation_error:e} rad"
             );
-            assert!(result.converged && result.rms_m < 1e-9, "{}", result.rms_m);
+            assert!(
+                result.alignment.converged && result.alignment.rms_m < 1e-9,
+                "{}",
+                result.alignment.rms_m
+            );
         }
     }
 }
@@ -196,8 +205,9 @@ fn local_search_alone_recovers_small_displacements_with_both_steps() {
         for _ in 0..20 {
             let start = displaced(&truth, &mesh, &mut rng, 0.01);
             let result = align_touches(&target, &touches, &start, &options).expect("aligns");
-            let error =
-                (result.base_from_part.translation.vector - truth.translation.vector).norm();
+            let error = (result.alignment.base_from_part.translation.vector
+                - truth.translation.vector)
+                .norm();
             // Point-to-point converges linearly (touches slide along faces a fraction per
             // iteration), so it is held to a looser bound than point-to-plane.
             let bound = if method == PsaMethod::PointToPlane {
@@ -208,8 +218,8 @@ fn local_search_alone_recovers_small_displacements_with_both_steps() {
             assert!(
                 error < bound,
                 "{method:?}: {error:e} m after {} iterations, rms {:e} {:?}, start {:e} m {} rad",
-                result.iterations,
-                result.rms_m,
+                result.alignment.iterations,
+                result.alignment.rms_m,
                 result.residuals,
                 (start.translation.vector - truth.translation.vector).norm(),
                 start.rotation.angle_to(&truth.rotation)
@@ -247,7 +257,7 @@ fn pose_error_under_noise_is_what_the_noise_predicts() {
             ..options(TIP_RADIUS_M)
         };
         let result = align_touches(&target, &touches, &start, &options).expect("aligns");
-        let delta = result.base_from_part * truth.inverse();
+        let delta = result.alignment.base_from_part * truth.inverse();
         let omega = delta.rotation.scaled_axis();
         // Express the error as rotation about `centre` followed by a translation t.
         let t = delta.translation.vector - centre.coords + delta.rotation * centre.coords;
@@ -291,7 +301,10 @@ fn a_cube_probed_3_2_1_is_ambiguous_and_face_hints_resolve_the_step_block() {
         result.ambiguous_with.len()
     );
     // The reported pose is the candidate nearest the start, here the truth.
-    assert!((result.base_from_part.translation.vector - truth.translation.vector).norm() < 1e-6);
+    assert!(
+        (result.alignment.base_from_part.translation.vector - truth.translation.vector).norm()
+            < 1e-6
+    );
 
     let block = step_block();
     let target = PsaTarget::new(&block)
@@ -304,7 +317,8 @@ fn a_cube_probed_3_2_1_is_ambiguous_and_face_hints_resolve_the_step_block() {
         let result =
             align_touches(&target, &touches, &start, &options(TIP_RADIUS_M)).expect("aligns");
         assert!(!result.is_ambiguous());
-        let error = (result.base_from_part.translation.vector - truth.translation.vector).norm();
+        let error =
+            (result.alignment.base_from_part.translation.vector - truth.translation.vector).norm();
         assert!(error < 1e-6, "{error:e}");
     }
 }
@@ -361,5 +375,8 @@ fn coherence_keeps_working_on_consistent_touches() {
     };
     let start = displaced(&truth, &mesh, &mut rng, 0.05);
     let result = align_touches(&target, &touches, &start, &options).expect("aligns");
-    assert!((result.base_from_part.translation.vector - truth.translation.vector).norm() < 1e-6);
+    assert!(
+        (result.alignment.base_from_part.translation.vector - truth.translation.vector).norm()
+            < 1e-6
+    );
 }

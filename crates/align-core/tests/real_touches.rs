@@ -87,20 +87,20 @@ fn blind_global_alignment_of_steeply_tilted_noisy_touches_finds_the_least_square
             )
             .unwrap();
             let apart = pose_distance(
-                &result.base_from_part,
-                &best.base_from_part,
+                &result.alignment.base_from_part,
+                &best.alignment.base_from_part,
                 mesh.radius_m(),
             );
-            assert!(result.converged, "{name} session {session}");
-            if apart < 1e-3 && result.rms_m <= best.rms_m * 1.01 + 1e-6 {
+            assert!(result.alignment.converged, "{name} session {session}");
+            if apart < 1e-3 && result.alignment.rms_m <= best.alignment.rms_m * 1.01 + 1e-6 {
                 found += 1;
                 assert!(result.incoherent.is_empty(), "{:?}", result.incoherent);
             } else {
                 println!(
                     "{name} session {session}: {:.1} mm from the optimum, rms {:.4} mm against {:.4} mm",
                     apart * 1e3,
-                    result.rms_m * 1e3,
-                    best.rms_m * 1e3
+                    result.alignment.rms_m * 1e3,
+                    best.alignment.rms_m * 1e3
                 );
             }
         }
@@ -169,23 +169,23 @@ fn local_fit_with_tilts_up_to_90_degrees_converges_to_the_least_squares_optimum(
             continue;
         };
         let apart = pose_distance(
-            &result.base_from_part,
-            &best.base_from_part,
+            &result.alignment.base_from_part,
+            &best.alignment.base_from_part,
             mesh.radius_m(),
         );
         assert!(
-            result.converged,
+            result.alignment.converged,
             "session {session}: {} iterations",
-            result.iterations
+            result.alignment.iterations
         );
-        if apart < 1e-5 || result.rms_m < best.rms_m {
+        if apart < 1e-5 || result.alignment.rms_m < best.alignment.rms_m {
             at_optimum += 1;
         } else {
             println!(
                 "session {session}: another minimum {:.2} mm from the optimum, rms {:.4} against {:.4} mm",
                 apart * 1e3,
-                result.rms_m * 1e3,
-                best.rms_m * 1e3
+                result.alignment.rms_m * 1e3,
+                best.alignment.rms_m * 1e3
             );
         }
     }
@@ -265,6 +265,7 @@ fn aligned(chain: &Chain, tool: &Tool, mesh: &Mesh, session: &JointSession) -> I
         },
     )
     .unwrap()
+    .alignment
     .base_from_part
 }
 
@@ -367,9 +368,9 @@ fn an_open_mesh_fitted_from_the_truth_ends_no_worse_than_the_truth() {
             .sqrt();
         let fit = optimum(&target, &touches, &truth, options.ball_radius_m);
         assert!(
-            fit.rms_m <= at_truth * 1.001,
+            fit.alignment.rms_m <= at_truth * 1.001,
             "session {session}: {:.4} mm against {:.4} mm at the truth",
-            fit.rms_m * 1e3,
+            fit.alignment.rms_m * 1e3,
             at_truth * 1e3
         );
     }

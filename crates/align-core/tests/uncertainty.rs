@@ -104,8 +104,8 @@ fn predicted_covariance_matches_a_monte_carlo_of_alignments() {
             .collect();
         let noisy = touches(&contacts, &truth, &offsets);
         let result = align_touches(&target, &noisy, &truth, &options).unwrap();
-        assert!(result.converged);
-        deviations.push(pose_deviation(&truth, &result.base_from_part));
+        assert!(result.alignment.converged);
+        deviations.push(pose_deviation(&truth, &result.alignment.base_from_part));
     }
 
     let mean = deviations.iter().fold(Vector6::zeros(), |sum, d| sum + d) / trials as f64;

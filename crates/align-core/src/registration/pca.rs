@@ -22,6 +22,7 @@ use super::psa::spread_rotations;
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
 use crate::geometry::Mesh;
+use crate::registration::Alignment;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PcaStep {
@@ -99,18 +100,12 @@ pub enum PcaError {
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct PcaResult {
-    pub base_from_part: Isometry3<f64>,
-    pub iterations: usize,
-    pub converged: bool,
-    /// RMS and max distance of the points kept in the last iteration, m.
-    pub rms_m: f64,
-    pub max_m: f64,
+    /// Its rms and max are of the points kept in the last iteration; its starts count the start
+    /// plus the exploration's runs.
+    pub alignment: Alignment,
     pub keypoints: usize,
     pub kept: usize,
     pub final_delta_m: f64,
-    /// Runs made: the start, plus the exploration's.
-    pub starts: usize,
-    pub time_s: f64,
 }
 
 fn delta_at(iteration: usize, delta0: f64, options: &PcaOptions) -> f64 {
@@ -200,16 +195,18 @@ pub fn align_cloud(
         (sum + m.distance * m.distance, max.max(m.distance))
     });
     Ok(PcaResult {
-        base_from_part: run.pose,
-        iterations: run.iterations,
-        converged: run.converged,
-        rms_m: (sum / final_matches.len().max(1) as f64).sqrt(),
-        max_m: max,
+        alignment: Alignment {
+            base_from_part: run.pose,
+            iterations: run.iterations,
+            converged: run.converged,
+            rms_m: (sum / final_matches.len().max(1) as f64).sqrt(),
+            max_m: max,
+            starts,
+            time_s: started.elapsed().as_secs_f64(),
+        },
         keypoints: keypoints.len(),
         kept: final_matches.len(),
         final_delta_m: run.delta,
-        starts,
-        time_s: started.elapsed().as_secs_f64(),
     })
 }
 

@@ -123,7 +123,13 @@ pub fn run_psa_trials(
     run_trials(part, deltas_m, trials, seed, on_trial, |start, _| {
         align_touches(&target, &touches, start, &options)
             .ok()
-            .map(|r| (r.base_from_part, r.iterations, r.is_ambiguous()))
+            .map(|r| {
+                (
+                    r.alignment.base_from_part,
+                    r.alignment.iterations,
+                    r.is_ambiguous(),
+                )
+            })
     })
 }
 
@@ -205,6 +211,6 @@ pub fn run_pca_trials(
     run_trials(part, deltas_m, trials, seed, on_trial, |start, delta_m| {
         align_cloud(&part.mesh, &cloud, start, delta_m, options)
             .ok()
-            .map(|r| (r.base_from_part, r.iterations, false))
+            .map(|r| (r.alignment.base_from_part, r.alignment.iterations, false))
     })
 }

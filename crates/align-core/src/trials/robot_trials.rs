@@ -296,7 +296,7 @@ pub fn run_robot_trials(
                 let result = align_cloud(mesh, &cloud, &start, delta_m, &pca_options);
                 let time_s = started.elapsed().as_secs_f64();
                 let error_m = result.map_or(delta_m, |r| {
-                    surface_deviation_m(mesh, &r.base_from_part, truth)
+                    surface_deviation_m(mesh, &r.alignment.base_from_part, truth)
                 });
                 rigid[slot + rigid_offset].push((trial, Outcome { error_m, time_s }));
             }

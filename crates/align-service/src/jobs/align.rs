@@ -106,7 +106,7 @@ pub fn uncertainty(session: &LoadedSession, result: &PsaResult) -> Result<Uncert
     let found = pose_uncertainty(
         &session.mesh,
         &session.touches,
-        &result.base_from_part,
+        &result.alignment.base_from_part,
         session.tool.tip_radius_m,
         sigma_m,
     )
@@ -175,12 +175,12 @@ pub fn uncertainty_json(found: &PoseUncertainty, sigma_source: &str) -> Uncertai
 
 fn output(result: &PsaResult, notes: Vec<String>) -> AlignReport {
     AlignReport {
-        pose: report_pose(&result.base_from_part),
-        iterations: result.iterations,
-        converged: result.converged,
-        rms: result.rms_m,
-        max: result.max_m,
-        time_s: result.time_s,
+        pose: report_pose(&result.alignment.base_from_part),
+        iterations: result.alignment.iterations,
+        converged: result.alignment.converged,
+        rms: result.alignment.rms_m,
+        max: result.alignment.max_m,
+        time_s: result.alignment.time_s,
         residuals: result
             .residuals
             .iter()
@@ -198,7 +198,7 @@ fn output(result: &PsaResult, notes: Vec<String>) -> AlignReport {
                 rms: c.rms_m,
             })
             .collect(),
-        starts: result.starts,
+        starts: result.alignment.starts,
         notes,
         uncertainty: None,
         uncertainty_error: None,

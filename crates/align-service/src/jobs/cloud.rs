@@ -115,18 +115,18 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
     )
     .map_err(|error| BadInput(format!("cannot align: {error}")))?;
     Ok(CloudReport {
-        pose: report_pose(&result.base_from_part),
-        iterations: result.iterations,
-        converged: result.converged,
-        rms: result.rms_m,
-        max: result.max_m,
-        time_s: result.time_s,
+        pose: report_pose(&result.alignment.base_from_part),
+        iterations: result.alignment.iterations,
+        converged: result.alignment.converged,
+        rms: result.alignment.rms_m,
+        max: result.alignment.max_m,
+        time_s: result.alignment.time_s,
         residuals: Vec::new(),
         cloud_points: cloud.len(),
         keypoints: result.keypoints,
         kept_points: result.kept,
         final_delta: result.final_delta_m,
-        starts: result.starts,
+        starts: result.alignment.starts,
         notes: mesh.notes().to_vec(),
     })
 }

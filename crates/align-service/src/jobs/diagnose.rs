@@ -47,7 +47,7 @@ pub fn diagnose_session(session: &LoadedSession) -> Result<SessionDiagnosis, Bad
         &session.tool,
         &session.mesh,
         &samples,
-        &aligned.base_from_part,
+        &aligned.alignment.base_from_part,
         sigma,
     )
     .map_err(BadInput)?;

@@ -567,6 +567,7 @@ pub fn align_robot(
         Some(mesh) => {
             align_cloud(mesh, &near, world_from_root_start, delta_m, &options.base)
                 .map_err(RobotFitError::Base)?
+                .alignment
                 .base_from_part
         }
         None => *world_from_root_start,

@@ -40,6 +40,7 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::svd::RegistrationError;
+use crate::registration::Alignment;
 pub use global::spread_rotations;
 use local::Workspace;
 pub use target::{Face, PsaTarget};
@@ -158,20 +159,13 @@ pub struct Candidate {
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct PsaResult {
-    pub base_from_part: Isometry3<f64>,
-    pub iterations: usize,
-    pub converged: bool,
-    pub rms_m: f64,
-    pub max_m: f64,
+    pub alignment: Alignment,
     pub residuals: Vec<TouchResidual>,
     /// Other distinct poses that fit as well as the chosen one (empty unless ambiguous).
     pub ambiguous_with: Vec<Candidate>,
     /// Touches whose closest face at the chosen pose turns away from their probe (beyond the
     /// coherence cone): a contact the ball could not have made there, worth a look.
     pub incoherent: Vec<String>,
-    /// Local alignments run (1 for a local search).
-    pub starts: usize,
-    pub time_s: f64,
 }
 
 impl PsaResult {
@@ -235,16 +229,18 @@ pub fn align_touches(
         .map(|r| r.distance_m.abs())
         .fold(0.0, f64::max);
     Ok(PsaResult {
-        base_from_part: best.pose,
-        iterations: best.iterations,
-        converged: best.converged,
-        rms_m: best.rms_m,
-        max_m,
+        alignment: Alignment {
+            base_from_part: best.pose,
+            iterations: best.iterations,
+            converged: best.converged,
+            rms_m: best.rms_m,
+            max_m,
+            starts,
+            time_s: started.elapsed().as_secs_f64(),
+        },
         residuals,
         ambiguous_with,
         incoherent,
-        starts,
-        time_s: started.elapsed().as_secs_f64(),
     })
 }
 
