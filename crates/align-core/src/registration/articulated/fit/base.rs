@@ -1,0 +1,145 @@
+//! Base hypotheses beyond the whole robot's rigid alignment: the proximal links aligned or
+//! detected on their own, and a round base turned to the start's angle.
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+
+use super::RobotFitOptions;
+use super::context::FitContext;
+use super::tree::{axis_of, search_order, turns_in_place};
+use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
+use crate::registration::pca::{pose_candidates, pose_candidates_spread};
+use crate::registration::ppf::ppf_poses;
+
+impl FitContext<'_> {
+    /// Base poses from rigid alignments of the proximal links (the base and the links only the
+    /// first joint moves) when the start may be off by more than they are big; none otherwise. A
+    /// base that looks the same at every angle about the first joint is turned to the start's
+    /// angle about it: the scan cannot tell, and the joints below start nearest their own values.
+    pub(super) fn proximal_candidates(
+        &self,
+        cloud: &[Point3<f64>],
+        world_from_root_start: &Isometry3<f64>,
+        q0: &[f64],
+        round_base: Option<&JointAxis>,
+    ) -> Vec<Isometry3<f64>> {
+        let FitContext {
+            body,
+            delta_m,
+            global,
+            options,
+            ..
+        } = *self;
+        if options.base_candidates == 0 {
+            return Vec::new();
+        }
+        let first = search_order(body).first().copied();
+        let proximal: Vec<usize> = (0..body.links().len())
+            .filter(|&l| body.movers(l).iter().all(|p| Some(*p) == first))
+            .collect();
+        let Some(mesh) = body.rigid_mesh_of(q0, &proximal) else {
+            return Vec::new();
+        };
+        // For small deltas the whole robot's rigid alignment finds the proximal links' place; for
+        // larger ones the other links, still at the wrong joint values, may pull it away. The line
+        // was set from exploratory runs without these candidates (not kept in the repo), where
+        // failures began near delta = radius; the trial table (docs/articulated-trials.md, 50
+        // trials per delta on both robots) is the check.
+        if delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
+            return Vec::new();
+        }
+        // The root moves by up to about twice delta (the robot turns about its centroid).
+        let root_bound_m = 2.0 * delta_m;
+        // A start that is not local has nothing near it to slide into place from: the links are
+        // detected anywhere the root may be.
+        let candidates: Vec<Isometry3<f64>> = if global {
+            ppf_poses(
+                &mesh,
+                cloud,
+                &(world_from_root_start * Point3::origin()),
+                root_bound_m,
+                &options.detection,
+                options.base_candidates,
+                DISTINCT_DETECTION_RAD,
+            )
+            .into_iter()
+            .map(|pose| pose.world_from_model)
+            .collect()
+        } else {
+            // The exploration's runs start where the start puts the links, turned; the spread's at
+            // translations of it (the start may be off by more than the links are big). Each finds
+            // the links where the other does not: with the exploration alone the ABB IRB 1600's
+            // boxy base was lost in 9 of 10 trials at 500 mm (docs/articulated-trials.md); the
+            // spread alone lost 3 of 50 UR10 trials at 500 mm in an exploratory build (sparser
+            // screening keypoints) that the exploration finds.
+            [pose_candidates_spread, pose_candidates]
+                .into_iter()
+                .flat_map(|candidates| {
+                    candidates(
+                        &mesh,
+                        cloud,
+                        world_from_root_start,
+                        root_bound_m,
+                        &options.proximal,
+                        options.base_candidates,
+                        DISTINCT_BASE_M,
+                    )
+                })
+                .collect()
+        };
+        match round_base {
+            Some(axis) => candidates
+                .iter()
+                .map(|c| turned_towards(c, world_from_root_start, axis))
+                .collect(),
+            None => candidates,
+        }
+    }
+}
+
+/// The first joint's axis (root frame) when the links no joint moves look the same at every
+/// angle about it (a round base): the scan then shows the base's turn about that axis and the
+/// joint's value only as their sum.
+pub(super) fn round_base_axis(
+    body: &ArticulatedBody,
+    q0: &[f64],
+    options: &RobotFitOptions,
+) -> Option<JointAxis> {
+    let first = *search_order(body).first()?;
+    let root_poses = body.link_poses(&Isometry3::identity(), q0);
+    let axis = axis_of(body, &root_poses, first)?;
+    let fixed: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.movers(l).is_empty())
+        .collect();
+    (!axis.prismatic && turns_in_place(body, &root_poses, &fixed, &axis, options.min_observability))
+        .then_some(axis)
+}
+
+/// Proximal candidates are searched when delta exceeds this fraction of the proximal links'
+/// radius (see [`FitContext::proximal_candidates`]).
+const PROXIMAL_DELTA_PER_RADIUS: f64 = 0.75;
+
+/// Base candidates closer than this (thesis pose distance) are one.
+const DISTINCT_BASE_M: f64 = 0.05;
+
+/// Detected base poses that turn the proximal links by less than this are one (and no closer
+/// than two detection steps).
+const DISTINCT_DETECTION_RAD: f64 = 0.3;
+
+/// `world_from_root` turned about `axis` (root frame) to the orientation nearest `towards`'s:
+/// the turn a base that looks the same at every angle about its first joint cannot show.
+pub(super) fn turned_towards(
+    world_from_root: &Isometry3<f64>,
+    towards: &Isometry3<f64>,
+    axis: &JointAxis,
+) -> Isometry3<f64> {
+    let wanted = world_from_root.rotation.inverse() * towards.rotation;
+    let direction = axis.axis.normalize();
+    let angle = 2.0
+        * wanted
+            .quaternion()
+            .vector()
+            .dot(&direction)
+            .atan2(wanted.quaternion().w);
+    let about = Translation3::from(axis.origin.coords);
+    *world_from_root * about * UnitQuaternion::from_scaled_axis(direction * angle) * about.inverse()
+}

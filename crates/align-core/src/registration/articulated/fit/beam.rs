@@ -1,0 +1,191 @@
+//! The first search down the tree: each joint searched from every state of a beam seeded by
+//! the base hypotheses, the decided links settled, the best states kept.
+
+use nalgebra::{Isometry3, Point3};
+use rayon::prelude::*;
+
+use super::RobotFitOptions;
+use super::context::FitContext;
+use super::joint_search::Candidate;
+use super::placed::coverage;
+use super::refine::{Refinement, SETTLE_DAMPING, refine, refine_links};
+use super::tree::search_order;
+
+/// Iterations of the refinement of the decided links after each joint of the beam search.
+const SETTLE_ITERATIONS: usize = 6;
+
+/// Points the beam scores its states on (a stride sample of the coarse keypoints).
+const BEAM_SCORE_POINTS: usize = 3000;
+
+/// Values of a joint the beam search follows from each of its states (the best local maxima).
+const PEAKS_PER_STATE: usize = 3;
+
+/// Two search states closer than a keypoint voxel (base) and a milliradian (every joint).
+fn same_state(
+    a: &(Isometry3<f64>, Vec<f64>),
+    b: &(Isometry3<f64>, Vec<f64>),
+    options: &RobotFitOptions,
+) -> bool {
+    (a.0.translation.vector - b.0.translation.vector).norm() < options.voxel_m
+        && a.0.rotation.angle_to(&b.0.rotation) < 1e-3
+        && a.1.iter().zip(&b.1).all(|(x, y)| (x - y).abs() < 1e-3)
+}
+
+impl FitContext<'_> {
+    /// The joints searched down the tree from each base hypothesis, keeping the `beam_width`
+    /// states whose decided links (those every joint above has been searched for) explain the
+    /// most scan points: a joint whose best value is wrong only because a link below it is still
+    /// far off survives as a runner-up until the links below decide. Each surviving state is then
+    /// refined, and the one explaining the most points wins.
+    pub(super) fn beam_search(
+        &self,
+        hypotheses: &[Isometry3<f64>],
+        q0: &[f64],
+    ) -> (Isometry3<f64>, Vec<f64>) {
+        let FitContext {
+            body,
+            scan,
+            global,
+            options,
+            ..
+        } = *self;
+        let width = options.beam_width.max(1);
+        let stride = scan.coarse.len().div_ceil(BEAM_SCORE_POINTS).max(1);
+        let sample: Vec<Point3<f64>> = scan.coarse.iter().step_by(stride).copied().collect();
+        let band = 3.0 * options.voxel_m;
+        let with_surface: Vec<usize> = (0..body.links().len())
+            .filter(|&l| body.links()[l].surface.is_some())
+            .collect();
+        let mut beam: Vec<(Isometry3<f64>, Vec<f64>)> =
+            hypotheses.iter().map(|h| (*h, q0.to_vec())).collect();
+        let mut searched: Vec<usize> = Vec::new();
+        for parameter in search_order(body) {
+            // The states are searched side by side (each search is parallel too, but its last
+            // few candidate values leave a core idle); merged in beam order, as if one by one.
+            let peaks = width.min(PEAKS_PER_STATE);
+            let search = |(base, q): &(Isometry3<f64>, Vec<f64>)| {
+                if global {
+                    self.global_joint_candidates(base, q, parameter, peaks)
+                } else {
+                    self.joint_candidates(base, q, parameter, peaks)
+                }
+            };
+            let searched_states: Vec<Vec<Candidate>> = if options.parallel {
+                beam.par_iter().map(search).collect()
+            } else {
+                beam.iter().map(search).collect()
+            };
+            let mut next = Vec::new();
+            for ((base, q), candidates) in beam.iter().zip(searched_states) {
+                for candidate in candidates {
+                    let mut q = q.clone();
+                    q[parameter] = candidate.value;
+                    for (other, value) in candidate.partner.into_iter().chain(candidate.deferred) {
+                        q[other] = value;
+                    }
+                    // States that reached the same configuration are settled once.
+                    if !next
+                        .iter()
+                        .any(|other| same_state(other, &(*base, q.clone()), options))
+                    {
+                        next.push((*base, q));
+                    }
+                }
+            }
+            if next.is_empty() {
+                continue;
+            }
+            searched.push(parameter);
+            let decided: Vec<usize> = with_surface
+                .iter()
+                .copied()
+                .filter(|&l| body.movers(l).iter().all(|p| searched.contains(p)))
+                .collect();
+            let settle = RobotFitOptions {
+                max_iterations: SETTLE_ITERATIONS,
+                ..options.clone()
+            };
+            let settle_band = 2.0 * band;
+            let settle_one = |(mut base, mut q): (Isometry3<f64>, Vec<f64>)| {
+                if settle.max_iterations > 0 {
+                    refine_links(
+                        body,
+                        &sample,
+                        &mut base,
+                        &mut q,
+                        &decided,
+                        &Refinement {
+                            options: &settle,
+                            band0_m: settle_band,
+                            damping: SETTLE_DAMPING,
+                            exact: false,
+                        },
+                    );
+                }
+                (
+                    coverage(body, &sample, &base, &q, &decided, band, options.parallel),
+                    base,
+                    q,
+                )
+            };
+            let mut scored: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
+                next.into_par_iter().map(settle_one).collect()
+            } else {
+                next.into_iter().map(settle_one).collect()
+            };
+            scored.sort_by_key(|s| std::cmp::Reverse(s.0));
+            // Keep distinct states only: two hypotheses that reached the same configuration
+            // would spend the beam twice.
+            beam.clear();
+            for (_, base, q) in scored {
+                let state = (base, q);
+                if !beam.iter().any(|other| same_state(other, &state, options)) {
+                    beam.push(state);
+                }
+                if beam.len() == width {
+                    break;
+                }
+            }
+        }
+        if beam.len() == 1 {
+            return beam.pop().expect("one state");
+        }
+        // Enough to rank the survivors: the winner is refined on every coarse keypoint next.
+        let refine_options = RobotFitOptions {
+            max_iterations: 8,
+            ..options.clone()
+        };
+        let band0 = options.refine_band0_m();
+        let rank = |(mut base, mut q): (Isometry3<f64>, Vec<f64>)| {
+            refine(
+                body,
+                &sample,
+                &mut base,
+                &mut q,
+                band0,
+                &refine_options,
+                false,
+            );
+            let score = coverage(
+                body,
+                &sample,
+                &base,
+                &q,
+                &with_surface,
+                band,
+                options.parallel,
+            );
+            (score, base, q)
+        };
+        let ranked: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
+            beam.into_par_iter().map(rank).collect()
+        } else {
+            beam.into_iter().map(rank).collect()
+        };
+        ranked
+            .into_iter()
+            .max_by_key(|(score, _, _)| *score)
+            .map(|(_, base, q)| (base, q))
+            .expect("the beam is never empty")
+    }
+}

@@ -1,0 +1,31 @@
+//! What every stage of one fit reads, carried in one place instead of long argument lists.
+
+use nalgebra::Point3;
+
+use super::RobotFitOptions;
+use crate::registration::articulated::body::ArticulatedBody;
+
+/// The scan's keypoints at two densities.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Keypoints<'a> {
+    /// One per voxel three keypoint voxels wide: what the refinements before the last, the
+    /// beam and the checks after it score on.
+    pub(super) coarse: &'a [Point3<f64>],
+    /// One per keypoint voxel: what a local joint search samples near the links it moves (a
+    /// wrist holds a handful of coarse keypoints, no more than the outliers around it).
+    pub(super) fine: &'a [Point3<f64>],
+}
+
+/// One fit's fixed inputs: the robot, the scan's keypoints, how far the start may be off and
+/// the options. The stages (base candidates, joint searches, checks) are its methods.
+#[derive(Clone, Copy)]
+pub(super) struct FitContext<'a> {
+    pub(super) body: &'a ArticulatedBody,
+    pub(super) scan: Keypoints<'a>,
+    /// How far any point of the robot may be from where the start puts it, m.
+    pub(super) delta_m: f64,
+    /// The start is not local (see [`super::searches_globally`]): the proximal links are
+    /// detected and each joint is searched with its child over its whole window.
+    pub(super) global: bool,
+    pub(super) options: &'a RobotFitOptions,
+}

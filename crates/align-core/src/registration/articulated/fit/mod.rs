@@ -1,0 +1,328 @@
+//! Hierarchical alignment of a robot in a scan (thesis 3.5, proposed there, built here): the base
+//! pose and the joint values, each link constrained by its parent.
+//!
+//! 1. Base hypotheses: the whole robot at the start joints aligned as one rigid part with Point
+//!    Cloud Alignment (its filters, weights, schedule and exploration); and, when delta exceeds
+//!    three quarters of the proximal links' radius, the best few rigid alignments of the
+//!    proximal links (the base and what only the first joint moves), which do not depend on
+//!    the other joints: from runs that start at the start turned (the exploration) and at
+//!    translations of it on a grid, screened (the start may be off by more than those links
+//!    are big, and a run in a band that wide settles on whatever else it holds).
+//! 2. Down the tree, a beam search: each joint's value by a 1-D search (coarse grid, then fine
+//!    around each of the best local maxima) scored by how many scan points the links it moves
+//!    explain (points buried inside a link count against it; points another link explains
+//!    count only where the moved links come nearer), with everything above it fixed; on the
+//!    coarse keypoints, or on the fine ones where few coarse ones are in reach (a wrist). A
+//!    link is only ever placed where its parent allows, which is what the independent alignment
+//!    lacked. After each joint the decided links (those every joint above has been searched
+//!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
+//!    decided links explain the most points go on: a joint misled by links below it that are
+//!    still far off survives as a runner-up until those links decide.
+//! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
+//!    cos-weighted points within a band that shrinks to `band_min_m`, each point assigned to
+//!    its nearest link surface; the joints are searched once more near the answer
+//!    (`search_passes`).
+//! 4. Half turns: a joint whose window allows it is tried turned by pi with the joints below it
+//!    searched again (a spherical wrist reaches the same poses as (a + pi, -b, c + pi)), and
+//!    kept when the robot then explains more of the scan. A base that is not round about the
+//!    first joint is turned about its axis with that joint turned back (`base_turn_check`):
+//!    the base's turn shows only on the base, and no step leaves it once the base's features
+//!    lie beyond the band.
+//! 5. Last, the same steps on every keypoint against the exact link surfaces.
+//!
+//! When delta exceeds the robot's radius (at the start joints) the start is not local: the
+//! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
+//! half turn. Two stages then change. The proximal links are detected anywhere the root may be
+//! by point pair features ([`crate::registration::ppf`]) instead of slid into place from the
+//! start; and each joint is searched together with its child on a grid fine enough that the
+//! value nearest the truth puts their links within the band, scored only on the links those
+//! two place (a joint whose two links turn in place about it, an upper arm standing on the
+//! axis of a round shoulder, is searched after its child, together with its grandchild).
+//!
+//! The searches and every refinement but the last ask each link's signed-distance grid (5 mm
+//! cells, built once with the [`ArticulatedBody`]) instead of its mesh: a few memory reads
+//! instead of a BVH descent, with a millimetre of blur at edges that the last refinement, on
+//! the exact surfaces, removes.
+//!
+//! Nothing is invented: a joint whose links hold too few points, or whose motion the points do
+//! not constrain (a cylinder turning about its own axis), keeps its start value and is reported.
+
+mod base;
+mod beam;
+mod checks;
+mod context;
+mod global_search;
+mod joint_search;
+mod options;
+mod placed;
+mod refine;
+mod report;
+#[cfg(test)]
+mod tests;
+mod tree;
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Point3};
+
+use super::body::ArticulatedBody;
+use crate::geometry::Mesh;
+use crate::registration::pca::{PcaError, align_cloud};
+use crate::registration::sampling::voxel_representatives;
+use base::round_base_axis;
+use context::{FitContext, Keypoints};
+use refine::refine;
+use report::final_state;
+use tree::search_order;
+
+pub use options::RobotFitOptions;
+pub use report::{JointFit, LinkFit, RobotFit};
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RobotFitError {
+    #[error("the cloud is empty")]
+    EmptyCloud,
+    #[error("cloud point {0} is not finite")]
+    NonFinitePoint(usize),
+    #[error("delta must be finite and > 0, got {0}")]
+    BadDelta(f64),
+    #[error("the robot has {expected} joints ({names}), {got} start values were given")]
+    JointCount {
+        expected: usize,
+        got: usize,
+        names: String,
+    },
+    #[error("start value {value} of joint '{joint}' is not finite")]
+    NonFiniteJoint { joint: String, value: f64 },
+    #[error("the base pose is not finite")]
+    NonFiniteBase,
+    #[error(
+        "no cloud point lies within {reach_m} m of the start base position: is the base pose right?"
+    )]
+    NothingInReach { reach_m: f64 },
+    #[error("aligning the whole robot at the start joints failed: {0}")]
+    Base(PcaError),
+}
+
+fn check_inputs(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q0: &[f64],
+    delta_m: f64,
+) -> Result<(), RobotFitError> {
+    if cloud.is_empty() {
+        return Err(RobotFitError::EmptyCloud);
+    }
+    if let Some(index) = cloud
+        .iter()
+        .position(|p| !p.coords.iter().all(|c| c.is_finite()))
+    {
+        return Err(RobotFitError::NonFinitePoint(index));
+    }
+    if !(delta_m.is_finite() && delta_m > 0.0) {
+        return Err(RobotFitError::BadDelta(delta_m));
+    }
+    let parameters = body.parameters();
+    if q0.len() != parameters.len() {
+        return Err(RobotFitError::JointCount {
+            expected: parameters.len(),
+            got: q0.len(),
+            names: parameters
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    if let Some((value, parameter)) = q0
+        .iter()
+        .zip(parameters)
+        .find(|(value, _)| !value.is_finite())
+    {
+        return Err(RobotFitError::NonFiniteJoint {
+            joint: parameter.name.clone(),
+            value: *value,
+        });
+    }
+    let finite_base = world_from_root
+        .translation
+        .vector
+        .iter()
+        .all(|c| c.is_finite())
+        && world_from_root
+            .rotation
+            .coords
+            .iter()
+            .all(|c| c.is_finite());
+    if !finite_base {
+        return Err(RobotFitError::NonFiniteBase);
+    }
+    Ok(())
+}
+
+/// Fits `body` to `cloud` (world frame) from the start base pose and joint values; `delta_m`
+/// bounds how far any point of the robot is from where the start puts it.
+pub fn align_robot(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root_start: &Isometry3<f64>,
+    q0: &[f64],
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> Result<RobotFit, RobotFitError> {
+    let started = Instant::now();
+    check_inputs(body, cloud, world_from_root_start, q0, delta_m)?;
+    // Only points the robot can reach from where the start puts it take part.
+    let root = world_from_root_start * Point3::origin();
+    let reach = body.max_reach_m() + 2.0 * delta_m + options.band_min_m;
+    let near: Vec<Point3<f64>> = cloud
+        .iter()
+        .filter(|p| (*p - root).norm() <= reach)
+        .copied()
+        .collect();
+    if near.is_empty() {
+        return Err(RobotFitError::NothingInReach { reach_m: reach });
+    }
+    let (keypoints, coarse) = rayon::join(
+        || voxel_representatives(&near, options.voxel_m),
+        || voxel_representatives(&near, options.voxel_m * 3.0),
+    );
+    let scan = Keypoints {
+        coarse: &coarse,
+        fine: &keypoints,
+    };
+    let start_mesh = body.rigid_mesh(q0);
+    let global = start_mesh
+        .as_ref()
+        .is_some_and(|mesh| is_global(mesh, delta_m));
+    let whole = match &start_mesh {
+        Some(mesh) => {
+            align_cloud(mesh, &near, world_from_root_start, delta_m, &options.base)
+                .map_err(RobotFitError::Base)?
+                .alignment
+                .base_from_part
+        }
+        None => *world_from_root_start,
+    };
+    let fit = FitContext {
+        body,
+        scan,
+        delta_m,
+        global,
+        options,
+    };
+    let round_base = round_base_axis(body, q0, options);
+    let mut hypotheses = vec![whole];
+    hypotheses.extend(fit.proximal_candidates(
+        &near,
+        world_from_root_start,
+        q0,
+        round_base.as_ref(),
+    ));
+    let (mut world_from_root, mut q) = fit.beam_search(&hypotheses, q0);
+    // Until the last refinement the surfaces come from the links' distance grids: a
+    // millimetre of blur at edges costs nothing while the joints are still being searched.
+    let band0 = options.refine_band0_m();
+    let coarse_refine = RobotFitOptions {
+        max_iterations: 15,
+        ..options.clone()
+    };
+    let mut iterations = refine(
+        body,
+        &coarse,
+        &mut world_from_root,
+        &mut q,
+        band0,
+        &coarse_refine,
+        false,
+    );
+    // Again with every joint near: a joint searched while the links below it were far off is
+    // searched once more.
+    for _ in 1..options.search_passes.max(1) {
+        for parameter in search_order(body) {
+            fit.search_joint(&world_from_root, &mut q, parameter);
+        }
+        iterations += refine(
+            body,
+            &coarse,
+            &mut world_from_root,
+            &mut q,
+            band0,
+            &coarse_refine,
+            false,
+        );
+    }
+    iterations += fit.flip_check(&mut world_from_root, &mut q);
+    if round_base.is_none() {
+        iterations += fit.base_turn_check(&mut world_from_root, &mut q);
+    }
+    // Last, every keypoint against the exact surfaces, in the narrow band the refinements
+    // before ended in (the state is within it).
+    iterations += refine(
+        body,
+        &keypoints,
+        &mut world_from_root,
+        &mut q,
+        options.band_min_m,
+        options,
+        true,
+    );
+    let mut state = final_state(body, &keypoints, &world_from_root, &q, options);
+    if global {
+        iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
+    }
+    let report::FinalState {
+        matches,
+        links,
+        observed,
+    } = state;
+    for (parameter, seen) in observed.iter().enumerate() {
+        if !seen {
+            q[parameter] = q0[parameter];
+        }
+    }
+    let with_base = round_base
+        .and(search_order(body).first().copied())
+        .filter(|&first| observed[first]);
+    let joints = body
+        .parameters()
+        .iter()
+        .zip(&q)
+        .zip(&observed)
+        .enumerate()
+        .map(|(index, ((parameter, &value), &observed))| JointFit {
+            name: parameter.name.clone(),
+            value,
+            observed,
+            turns_with_base: with_base == Some(index),
+        })
+        .collect();
+    let sum: f64 = matches.iter().map(|m| m.distance * m.distance).sum();
+    Ok(RobotFit {
+        world_from_root,
+        q,
+        links,
+        joints,
+        iterations,
+        rms_m: (sum / matches.len().max(1) as f64).sqrt(),
+        time_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// True when [`align_robot`] treats a start as not local and searches globally (detects the
+/// proximal links, searches each joint with its child over its whole window): when delta
+/// exceeds the robot's radius at the start joints, the robot may be turned by more than a
+/// radian and its joints be anywhere in windows of up to a half turn each way.
+pub fn searches_globally(body: &ArticulatedBody, q0: &[f64], delta_m: f64) -> bool {
+    body.rigid_mesh(q0)
+        .is_some_and(|mesh| is_global(&mesh, delta_m))
+}
+
+fn is_global(robot_at_start: &Mesh, delta_m: f64) -> bool {
+    delta_m > GLOBAL_DELTA_PER_RADIUS * robot_at_start.radius_m()
+}
+
+/// The start is taken as not local when delta exceeds this fraction of the robot's radius at
+/// the start joints (see [`align_robot`]): turns of the whole robot by more than a radian.
+const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;

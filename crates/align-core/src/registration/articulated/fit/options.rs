@@ -1,0 +1,86 @@
+//! The fit's options.
+
+use crate::registration::pca::PcaOptions;
+use crate::registration::ppf::PpfOptions;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotFitOptions {
+    /// Voxel edge of the keypoints, m.
+    pub voxel_m: f64,
+    /// The band the refinement ends with: points farther from every link are not used, m.
+    pub band_min_m: f64,
+    /// A link with fewer points than this is reported as not visible.
+    pub min_link_points: usize,
+    /// A joint whose motion moves its points along their normals by less than this fraction of
+    /// its reach per radian (RMS) is not constrained by the scan.
+    pub min_observability: f64,
+    pub search_passes: usize,
+    /// States the first search down the tree keeps at each joint.
+    pub beam_width: usize,
+    /// Further base poses the search starts from when the start may be off by about as much as
+    /// the base is big: rigid alignments of the base and the links only the first joint moves.
+    pub base_candidates: usize,
+    pub max_iterations: usize,
+    /// The refinement stops when a step moves the points along their normals by less than this
+    /// (RMS), m.
+    pub tolerance_m: f64,
+    pub parallel: bool,
+    /// The rigid first alignment of the whole robot.
+    pub base: PcaOptions,
+    /// The exploration and the spread of starts for rigid alignments of the proximal links
+    /// (`base_candidates` from each).
+    pub proximal: PcaOptions,
+    /// The detection of the proximal links anywhere near the start (point pair features),
+    /// which gives the base candidates instead when the start is not local (delta beyond the
+    /// robot's radius).
+    pub detection: PpfOptions,
+}
+
+impl Default for RobotFitOptions {
+    fn default() -> Self {
+        Self {
+            voxel_m: 0.006,
+            band_min_m: 0.01,
+            min_link_points: 12,
+            min_observability: 0.05,
+            search_passes: 2,
+            beam_width: 6,
+            base_candidates: 4,
+            // The last refinement starts within the narrow band and takes a handful when the
+            // correspondences settle; should they cycle (points switching between links at the
+            // 0.1 mm level), it keeps the best of 25.
+            max_iterations: 25,
+            // A tenth of a millimetre: a tenth of the success bar, below the scan's noise.
+            tolerance_m: 1e-4,
+            parallel: true,
+            // 20 mm keypoints, a short schedule and a loose stop (half a millimetre over five
+            // iterations): the rigid stage only has to bring the base near; the joints are
+            // still wrong while it runs, so it cannot converge closer than that and would only
+            // run to its limit. (30 mm keypoints lost an iiwa14 at 100 mm in exploratory runs.)
+            base: PcaOptions {
+                voxel_m: 0.02,
+                schedule_iterations: 40,
+                max_iterations: 60,
+                tolerance_m: 5e-4,
+                window: 5,
+                ..PcaOptions::default()
+            },
+            // The proximal links are small: 15 mm keypoints (45 mm for the exploration's and the
+            // spread's runs, 45-90 mm for the spread's screening).
+            proximal: PcaOptions {
+                voxel_m: 0.015,
+                schedule_iterations: 40,
+                max_iterations: 60,
+                ..PcaOptions::default()
+            },
+            detection: PpfOptions::default(),
+        }
+    }
+}
+
+impl RobotFitOptions {
+    /// The band a refinement starts from, before it shrinks to `band_min_m`.
+    pub(super) fn refine_band0_m(&self) -> f64 {
+        (3.0 * self.band_min_m).max(self.voxel_m * 6.0)
+    }
+}

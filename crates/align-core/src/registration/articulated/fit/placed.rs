@@ -1,0 +1,332 @@
+//! Link surfaces placed in the world and the point queries every stage scores and refines with.
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
+
+use crate::registration::articulated::body::ArticulatedBody;
+
+/// A keypoint matched to a link surface.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Match {
+    pub(super) point: Point3<f64>,
+    pub(super) surface: Point3<f64>,
+    pub(super) normal: Vector3<f64>,
+    pub(super) distance: f64,
+    pub(super) weight: f64,
+    pub(super) link: usize,
+}
+
+/// Link surfaces placed in the world, with their bounds, ready for point queries.
+pub(super) struct Placed<'a> {
+    pub(super) body: &'a ArticulatedBody,
+    pub(super) poses: Vec<Isometry3<f64>>,
+    pub(super) inverse: Vec<Isometry3<f64>>,
+    /// False: [`Placed::nearest`] takes the surface point and normal from the links' distance
+    /// grids (a millimetre of blur at edges, no edge rejection) where they answer the band.
+    pub(super) exact: bool,
+    /// Each link surface's bounding sphere in the world (centre, radius), for a quick "too far".
+    pub(super) spheres: Vec<Option<(Point3<f64>, f64)>>,
+}
+
+impl<'a> Placed<'a> {
+    pub(super) fn new(
+        body: &'a ArticulatedBody,
+        world_from_root: &Isometry3<f64>,
+        q: &[f64],
+    ) -> Self {
+        let poses = body.link_poses(world_from_root, q);
+        let inverse = poses.iter().map(|p| p.inverse()).collect();
+        let spheres = body
+            .links()
+            .iter()
+            .zip(&poses)
+            .map(|(link, pose)| {
+                let surface = link.surface.as_ref()?;
+                Some((pose * surface.centroid(), surface.radius_m()))
+            })
+            .collect();
+        Self {
+            body,
+            poses,
+            inverse,
+            exact: true,
+            spheres,
+        }
+    }
+
+    /// False when `point` is farther than `band` from every point of `link`'s surface.
+    pub(super) fn within_reach(&self, point: &Point3<f64>, link: usize, band: f64) -> bool {
+        self.spheres[link].is_some_and(|(centre, radius)| {
+            (point - centre).norm_squared() <= (radius + band) * (radius + band)
+        })
+    }
+
+    /// The nearest surface of `links` within `band` of `point`.
+    pub(super) fn nearest(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> Option<Match> {
+        let mut best: Option<Match> = None;
+        for &link in links {
+            let body_link = &self.body.links()[link];
+            let Some(surface) = &body_link.surface else {
+                continue;
+            };
+            let limit = best.map_or(band, |b| b.distance);
+            if !self.within_reach(point, link, limit) {
+                continue;
+            }
+            let local = self.inverse[link] * point;
+            if let Some(grid) = &body_link.grid {
+                let reliable = grid.reliable_m();
+                let value = grid.distance_and_gradient(&local);
+                if !self.exact {
+                    match value {
+                        Some((signed, gradient)) if signed.abs() < reliable => {
+                            let distance = signed.abs();
+                            if let (true, Some(normal)) =
+                                (distance < limit, gradient.try_normalize(1e-9))
+                            {
+                                best = Some(Match {
+                                    point: *point,
+                                    surface: self.poses[link] * (local - normal * signed),
+                                    normal: self.poses[link].rotation * normal,
+                                    distance,
+                                    weight: (distance / band * std::f64::consts::FRAC_PI_2).cos(),
+                                    link,
+                                });
+                            }
+                            continue;
+                        }
+                        // Beyond what the grid answers: farther than the band, or the exact
+                        // query below for a band wider than the grid.
+                        _ if limit <= reliable => continue,
+                        _ => {}
+                    }
+                } else if limit <= reliable {
+                    // The grid's value is within a cell diagonal of the true distance (a
+                    // distance field changes by at most the distance moved) while that is
+                    // within the margin: beyond that it rules the link out without the
+                    // exact query.
+                    let slack = grid.cell_m() * 3f64.sqrt();
+                    if value.is_none_or(|(signed, _)| signed.abs() > limit + slack) {
+                        continue;
+                    }
+                }
+            }
+            let (lower, upper) = surface.bounds();
+            let inside_box =
+                (0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band);
+            if !inside_box {
+                continue;
+            }
+            let Some(closest) = surface.closest_point_within(&local, limit) else {
+                continue;
+            };
+            let distance = closest.signed_distance.abs();
+            // A point whose nearest feature is an edge, more than a millimetre away, lies beyond
+            // the link (floor or a fixture meeting it) and would drag the edge towards it.
+            if !closest.on_face && distance > EDGE_REJECTION_M {
+                continue;
+            }
+            if best.is_none_or(|b| distance < b.distance) {
+                best = Some(Match {
+                    point: *point,
+                    surface: self.poses[link] * closest.point,
+                    normal: self.poses[link].rotation * closest.normal,
+                    distance,
+                    weight: (distance / band * std::f64::consts::FRAC_PI_2).cos(),
+                    link,
+                });
+            }
+        }
+        best
+    }
+
+    /// What `point` says about the links placed here: +1 when it lies on the surface of one of
+    /// `links` (within `band` outside, within `inside_m` inside), -2 when it lies deeper inside
+    /// one (a scanner cannot see into a solid: a link crossing the floor or a neighbour is
+    /// wrong there), 0 otherwise.
+    pub(super) fn evidence(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        links: &[usize],
+    ) -> i64 {
+        let mut buried = false;
+        for &link in links {
+            let body_link = &self.body.links()[link];
+            let Some(surface) = &body_link.surface else {
+                continue;
+            };
+            // Nothing beyond the band outside the bounding sphere is near or inside the link.
+            if !self.within_reach(point, link, band) {
+                continue;
+            }
+            let local = self.inverse[link] * point;
+            if let Some(grid) = body_link
+                .grid
+                .as_ref()
+                .filter(|g| band.max(inside_m) <= g.reliable_m())
+            {
+                match grid.signed_distance_m(&local) {
+                    Some(distance) if distance > band => {}
+                    Some(distance) if distance >= -inside_m => return 1,
+                    Some(_) => buried = true,
+                    None => {}
+                }
+                continue;
+            }
+            let (lower, upper) = surface.bounds();
+            if !(0..3).all(|a| local[a] >= lower[a] - band && local[a] <= upper[a] + band) {
+                continue;
+            }
+            match surface.closest_point_within(&local, band) {
+                Some(closest) if closest.signed_distance >= -inside_m => return 1,
+                Some(_) => buried = true,
+                None => {
+                    let in_box = (0..3).all(|a| local[a] >= lower[a] && local[a] <= upper[a]);
+                    if in_box
+                        && surface.is_watertight()
+                        && surface.closest_point(&local).signed_distance < -inside_m
+                    {
+                        buried = true;
+                    }
+                }
+            }
+        }
+        if buried { -2 } else { 0 }
+    }
+
+    /// [`Self::evidence`] of a point another link's surface is `claimed_m` from (infinite when
+    /// none is near): such a point counts for `links` only where they come nearer to it, and
+    /// never against them (links meet at their joints).
+    pub(super) fn evidence_nearer(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        claimed_m: f64,
+        links: &[usize],
+    ) -> i64 {
+        if claimed_m.is_finite() {
+            self.evidence(point, band.min(claimed_m), inside_m.min(claimed_m), links)
+                .max(0)
+        } else {
+            self.evidence(point, band, inside_m, links)
+        }
+    }
+
+    /// Whether `point` lies within `band` of the surface of one of `links`.
+    pub(super) fn supports(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> bool {
+        links
+            .iter()
+            .any(|&link| self.link_distance(point, band, band, link).is_some())
+    }
+
+    /// The distance of `point` from the nearest surface of `links`, when within `band`.
+    pub(super) fn distance_within(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        links: &[usize],
+    ) -> Option<f64> {
+        links.iter().fold(None, |nearest, &link| {
+            self.link_distance(point, band, nearest.unwrap_or(band), link)
+                .or(nearest)
+        })
+    }
+
+    /// The distance of `point` from `link`'s surface when within `limit` (no more than `band`):
+    /// from its distance grid when that answers as far as `band`, else exactly.
+    fn link_distance(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        limit: f64,
+        link: usize,
+    ) -> Option<f64> {
+        let body_link = &self.body.links()[link];
+        let surface = body_link.surface.as_ref()?;
+        if !self.within_reach(point, link, limit) {
+            return None;
+        }
+        let local = self.inverse[link] * point;
+        let distance =
+            if let Some(grid) = body_link.grid.as_ref().filter(|g| band <= g.reliable_m()) {
+                grid.signed_distance_m(&local)?.abs()
+            } else {
+                let (lower, upper) = surface.bounds();
+                if !(0..3).all(|a| local[a] >= lower[a] - limit && local[a] <= upper[a] + limit) {
+                    return None;
+                }
+                surface
+                    .closest_point_within(&local, limit)?
+                    .signed_distance
+                    .abs()
+            };
+        (distance <= limit).then_some(distance)
+    }
+}
+
+const EDGE_REJECTION_M: f64 = 1e-3;
+
+pub(super) fn correspond(
+    placed: &Placed,
+    keypoints: &[Point3<f64>],
+    band: f64,
+    links: &[usize],
+    parallel: bool,
+) -> Vec<Match> {
+    let one = |p: &Point3<f64>| placed.nearest(p, band, links).filter(|m| m.weight > 0.0);
+    if parallel {
+        keypoints.par_iter().filter_map(one).collect()
+    } else {
+        keypoints.iter().filter_map(one).collect()
+    }
+}
+
+/// Largest distance of the surfaces of `links` from `origin`, m.
+pub(super) fn reach_m(placed: &Placed, links: &[usize], origin: &Point3<f64>) -> f64 {
+    links
+        .iter()
+        .filter_map(|&link| {
+            let surface = placed.body.links()[link].surface.as_ref()?;
+            let centre = placed.poses[link] * surface.centroid();
+            Some((centre - origin).norm() + surface.radius_m())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// How well `links` explain `sample`: points within `band` of their surfaces count +1, points
+/// buried deeper than `band` inside one count -2 (see [`Placed::evidence`]).
+pub(super) fn coverage(
+    body: &ArticulatedBody,
+    sample: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    links: &[usize],
+    band: f64,
+    parallel: bool,
+) -> i64 {
+    let placed = Placed::new(body, world_from_root, q);
+    if parallel {
+        sample
+            .par_iter()
+            .map(|p| placed.evidence(p, band, band, links))
+            .sum()
+    } else {
+        sample
+            .iter()
+            .map(|p| placed.evidence(p, band, band, links))
+            .sum()
+    }
+}
+
+pub(super) fn placed_radius(placed: &Placed) -> f64 {
+    let root = placed.poses[placed.body.root()] * Point3::origin();
+    reach_m(
+        placed,
+        &(0..placed.body.links().len()).collect::<Vec<_>>(),
+        &root,
+    )
+    .max(0.01)
+}

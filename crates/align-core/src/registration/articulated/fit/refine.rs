@@ -1,0 +1,203 @@
+//! Gauss-Newton point-to-plane refinement of the base pose and the joints together.
+
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use super::RobotFitOptions;
+use super::placed::{Match, Placed, correspond, placed_radius};
+use crate::registration::articulated::body::ArticulatedBody;
+
+/// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.
+pub(super) fn refine(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &mut Isometry3<f64>,
+    q: &mut [f64],
+    band0: f64,
+    options: &RobotFitOptions,
+    exact: bool,
+) -> usize {
+    let all: Vec<usize> = (0..body.links().len()).collect();
+    refine_links(
+        body,
+        keypoints,
+        world_from_root,
+        q,
+        &all,
+        &Refinement {
+            options,
+            band0_m: band0,
+            damping: REFINE_DAMPING,
+            exact,
+        },
+    )
+}
+
+/// Damping of the refinement's normal equations, relative to their largest diagonal entry.
+const REFINE_DAMPING: f64 = 1e-6;
+/// Damping while the beam search settles the links decided so far: much stronger, because
+/// some of their motions are not constrained yet (the first joint and the base's turn about it
+/// while every decided link is round about that axis) and must not wander until a link below
+/// shows them.
+pub(super) const SETTLE_DAMPING: f64 = 1e-3;
+
+/// How a refinement runs, apart from what it moves and matches.
+#[derive(Clone, Copy)]
+pub(super) struct Refinement<'a> {
+    /// The band it ends with, its iterations, tolerance and parallelism.
+    pub(super) options: &'a RobotFitOptions,
+    /// The band it starts from before shrinking to `options.band_min_m`, m.
+    pub(super) band0_m: f64,
+    /// Damping of the normal equations, relative to their largest diagonal entry.
+    pub(super) damping: f64,
+    /// Match against the exact link surfaces; false: their distance grids where they answer
+    /// (see [`Placed::exact`]).
+    pub(super) exact: bool,
+}
+
+/// [`refine`] on the surfaces of `links` only, with `refinement.damping` (relative to the
+/// largest diagonal entry): joints that move none of them keep their values.
+pub(super) fn refine_links(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &mut Isometry3<f64>,
+    q: &mut [f64],
+    links: &[usize],
+    refinement: &Refinement,
+) -> usize {
+    let Refinement {
+        options,
+        band0_m: band0,
+        damping,
+        exact,
+    } = *refinement;
+    let n = 6 + q.len();
+    // A refinement that starts in the narrow band has nothing to shrink.
+    let shrink_iterations = if band0 > options.band_min_m {
+        options.max_iterations.min(10)
+    } else {
+        0
+    };
+    let mut iterations = 0;
+    let mut still = 0;
+    // Once the band is fixed, correspondences switching between links or in and out of the
+    // band can make Gauss-Newton cycle around the optimum by a few tenths of a millimetre
+    // without two steps in a row below the tolerance: a refinement that runs out of
+    // iterations ends at the state whose points carried the most weight (the robust kernel's
+    // objective; a mean residual would favour states that push points out of the band).
+    let mut best: Option<(f64, Isometry3<f64>, Vec<f64>)> = None;
+    while iterations < options.max_iterations {
+        let fraction = if shrink_iterations == 0 {
+            1.0
+        } else {
+            (iterations as f64 / shrink_iterations as f64).min(1.0)
+        };
+        let band = options.band_min_m
+            + (band0 - options.band_min_m) * (fraction * std::f64::consts::FRAC_PI_2).cos();
+        iterations += 1;
+        let mut placed = Placed::new(body, world_from_root, q);
+        placed.exact = exact;
+        let matches = correspond(&placed, keypoints, band, links, options.parallel);
+        if matches.len() < 6 {
+            break;
+        }
+        let total_weight: f64 = matches.iter().map(|m| m.weight).sum();
+        if fraction >= 1.0
+            && best
+                .as_ref()
+                .is_none_or(|(best_weight, _, _)| total_weight > *best_weight)
+        {
+            best = Some((total_weight, *world_from_root, q.to_vec()));
+        }
+        let scale = placed_radius(&placed);
+        let (normal, rhs) = normal_equations(body, &placed, &matches, scale);
+        let Some(step) = solve_damped(normal.clone(), rhs, damping) else {
+            break;
+        };
+        // How far the step moves the points along their normals (RMS): motions no point
+        // constrains (a symmetric link's spin) do not count.
+        let normal_motion = step.dot(&(&normal * &step)).max(0.0) / total_weight;
+        let normal_motion_m = normal_motion.sqrt();
+        let omega = Vector3::new(step[0], step[1], step[2]) / scale;
+        let translation = Vector3::new(step[3], step[4], step[5]);
+        let centre = world_from_root.translation.vector;
+        let rotation = UnitQuaternion::from_scaled_axis(omega);
+        let shift = centre + translation - rotation * centre;
+        *world_from_root =
+            Isometry3::from_parts(Translation3::from(shift), rotation) * *world_from_root;
+        for (parameter, value) in q.iter_mut().enumerate() {
+            let info = &body.parameters()[parameter];
+            let change = step[6 + parameter] / if info.prismatic { 1.0 } else { scale };
+            *value = (*value + change).clamp(info.lower, info.upper);
+        }
+        debug_assert_eq!(step.len(), n);
+        still = if normal_motion_m < options.tolerance_m {
+            still + 1
+        } else {
+            0
+        };
+        if fraction >= 1.0 && still >= 2 {
+            return iterations;
+        }
+    }
+    if let Some((_, best_pose, best_q)) = best {
+        *world_from_root = best_pose;
+        q.copy_from_slice(&best_q);
+    }
+    iterations
+}
+
+/// J^T W J and J^T W r of the point-to-plane residuals; rotations (base and revolute joints)
+/// are scaled by `scale` (m) so that every column is in metres.
+pub(super) fn normal_equations(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    matches: &[Match],
+    scale: f64,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let n = 6 + body.parameters().len();
+    let axes = body.axes(&placed.poses);
+    let centre = placed.poses[body.root()].translation.vector;
+    let joints_above: Vec<Vec<usize>> = (0..body.links().len())
+        .map(|link| body.joints_above(link))
+        .collect();
+    let mut normal = DMatrix::zeros(n, n);
+    let mut rhs = DVector::zeros(n);
+    let mut row = DVector::zeros(n);
+    for m in matches {
+        row.fill(0.0);
+        let lever = (m.surface.coords - centre).cross(&m.normal) / scale;
+        for axis in 0..3 {
+            row[axis] = lever[axis];
+            row[3 + axis] = m.normal[axis];
+        }
+        for &joint in &joints_above[m.link] {
+            if let Some((frame, parameter, multiplier)) = axes[joint] {
+                row[6 + parameter] += multiplier
+                    * if frame.prismatic {
+                        frame.axis.dot(&m.normal)
+                    } else {
+                        frame.axis.dot(&(m.surface - frame.origin).cross(&m.normal)) / scale
+                    };
+            }
+        }
+        let residual = m.normal.dot(&(m.point - m.surface));
+        normal.syger(m.weight, &row, &row, 1.0);
+        rhs.axpy(residual * m.weight, &row, 1.0);
+    }
+    // The rank-one updates fill the lower triangle only; the refinement's measure of a step
+    // (step . normal step) needs the whole matrix.
+    normal.fill_upper_triangle_with_lower_triangle();
+    (normal, rhs)
+}
+
+/// Solves the normal equations with a little damping, so that a direction no point constrains
+/// (a symmetric link's spin, a link nobody sees) stays where it is instead of blowing up.
+fn solve_damped(mut normal: DMatrix<f64>, rhs: DVector<f64>, damping: f64) -> Option<DVector<f64>> {
+    let largest = (0..normal.nrows())
+        .map(|i| normal[(i, i)])
+        .fold(0.0, f64::max);
+    for i in 0..normal.nrows() {
+        normal[(i, i)] += largest * damping + 1e-12;
+    }
+    Some(normal.cholesky()?.solve(&rhs))
+}

@@ -1,0 +1,147 @@
+//! What a fit reports: the public result types and the final state they are read from.
+
+use nalgebra::{Isometry3, Point3};
+
+use super::RobotFitOptions;
+use super::placed::{Match, Placed, correspond};
+use crate::registration::articulated::body::ArticulatedBody;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkFit {
+    pub name: String,
+    /// Scan points assigned to the link in the final band.
+    pub points: usize,
+    pub rms_m: f64,
+    /// False for links without geometry and links with fewer than `min_link_points` points.
+    pub visible: bool,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointFit {
+    pub name: String,
+    pub value: f64,
+    /// False when the scan did not constrain the joint: its value is the start value.
+    pub observed: bool,
+    /// True for the first joint of a robot whose base looks the same at every angle about the
+    /// joint's axis (a round base): the scan fixes the base's turn about that axis plus the
+    /// joint's value, not each. The links are placed right either way; the split between base
+    /// yaw and joint value is the start's (a controller's joint reading settles it).
+    pub turns_with_base: bool,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotFit {
+    pub world_from_root: Isometry3<f64>,
+    pub q: Vec<f64>,
+    pub links: Vec<LinkFit>,
+    pub joints: Vec<JointFit>,
+    pub iterations: usize,
+    pub rms_m: f64,
+    pub time_s: f64,
+}
+
+/// The fit's correspondences on the exact surfaces, per-link fits and observed parameters.
+pub(super) struct FinalState {
+    pub(super) matches: Vec<Match>,
+    pub(super) links: Vec<LinkFit>,
+    pub(super) observed: Vec<bool>,
+}
+
+/// The [`FinalState`] of the fit at `world_from_root` and `q`.
+pub(super) fn final_state(
+    body: &ArticulatedBody,
+    keypoints: &[Point3<f64>],
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    options: &RobotFitOptions,
+) -> FinalState {
+    let placed = Placed::new(body, world_from_root, q);
+    let all: Vec<usize> = (0..body.links().len()).collect();
+    let matches = correspond(
+        &placed,
+        keypoints,
+        options.band_min_m,
+        &all,
+        options.parallel,
+    );
+    let links = link_fits(body, &matches, options.min_link_points);
+    let observed = observed_parameters(body, &placed, &matches, &links, options);
+    FinalState {
+        matches,
+        links,
+        observed,
+    }
+}
+
+fn link_fits(body: &ArticulatedBody, matches: &[Match], min_points: usize) -> Vec<LinkFit> {
+    let mut counts = vec![(0usize, 0.0f64); body.links().len()];
+    for m in matches {
+        counts[m.link].0 += 1;
+        counts[m.link].1 += m.distance * m.distance;
+    }
+    body.links()
+        .iter()
+        .zip(counts)
+        .map(|(link, (points, sum))| LinkFit {
+            name: link.name.clone(),
+            points,
+            rms_m: if points > 0 {
+                (sum / points as f64).sqrt()
+            } else {
+                0.0
+            },
+            visible: link.surface.is_some() && points >= min_points,
+        })
+        .collect()
+}
+
+/// A parameter is observed when its links hold points and turning it moves those points along
+/// their normals (RMS over the points, per radian, relative to the links' reach).
+fn observed_parameters(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    matches: &[Match],
+    links: &[LinkFit],
+    options: &RobotFitOptions,
+) -> Vec<bool> {
+    let axes = body.axes(&placed.poses);
+    (0..body.parameters().len())
+        .map(|parameter| {
+            let moved = body.moved_by(parameter);
+            if !moved.iter().any(|&l| links[l].visible) {
+                return false;
+            }
+            let mut sum = 0.0;
+            let mut count = 0usize;
+            let mut reach: f64 = 0.0;
+            for m in matches
+                .iter()
+                .filter(|m| moved.contains(&m.link) && links[m.link].visible)
+            {
+                let mut motion = 0.0;
+                for joint in body.joints_above(m.link) {
+                    if let Some((frame, p, multiplier)) = axes[joint]
+                        && p == parameter
+                    {
+                        motion += multiplier
+                            * if frame.prismatic {
+                                frame.axis.dot(&m.normal)
+                            } else {
+                                let arm = m.surface - frame.origin;
+                                reach = reach.max(frame.axis.cross(&arm).norm());
+                                frame.axis.dot(&arm.cross(&m.normal))
+                            };
+                    }
+                }
+                sum += motion * motion;
+                count += 1;
+            }
+            let rms = (sum / count.max(1) as f64).sqrt();
+            if body.parameters()[parameter].prismatic {
+                rms >= options.min_observability
+            } else {
+                rms >= options.min_observability * reach.max(options.voxel_m)
+            }
+        })
+        .collect()
+}
