@@ -39,13 +39,13 @@
 //! Held-out errors: every fit reports a leave-one-out RMS from its hat matrix (PRESS); the
 //! pose-only fit and the applied correction report it from real refits without each touch.
 
-mod effect;
+mod effects;
 mod model;
 mod selection;
 
 use nalgebra::{DVector, Isometry3};
 
-pub use effect::Effect;
+pub use effects::{Effect, UnknownEffect};
 use model::Problem;
 use selection::{AMBIGUITY_BIC, Assessment, Candidate};
 

@@ -4,7 +4,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::effect::Effect;
+use super::effects::Effect;
 use super::{Fit, TouchSample};
 use crate::geometry::Mesh;
 use crate::kinematics::Chain;
@@ -19,13 +19,13 @@ pub(super) struct Param {
 
 /// The effect parameters' values, zero where not fitted.
 #[derive(Debug, Default)]
-struct Extras {
-    joint_offsets_rad: Vec<f64>,
-    compliance_rad_per_nm: Vec<f64>,
-    latency_s: f64,
-    tcp_shift_m: Vector3<f64>,
-    delta_radius_m: f64,
-    scale_minus_one: f64,
+pub(super) struct Extras {
+    pub joint_offsets_rad: Vec<f64>,
+    pub compliance_rad_per_nm: Vec<f64>,
+    pub latency_s: f64,
+    pub tcp_shift_m: Vector3<f64>,
+    pub delta_radius_m: f64,
+    pub scale_minus_one: f64,
 }
 
 pub(super) struct Problem<'a> {
@@ -61,14 +61,7 @@ impl Problem<'_> {
         };
         for (k, param) in params.iter().enumerate() {
             let value = theta[6 + k];
-            match param.effect {
-                Effect::ProbeRadius => extras.delta_radius_m = value,
-                Effect::TcpOffset => extras.tcp_shift_m[param.index] = value,
-                Effect::JointOffsets => extras.joint_offsets_rad[param.index] = value,
-                Effect::JointCompliance => extras.compliance_rad_per_nm[param.index] = value,
-                Effect::PartScale => extras.scale_minus_one = value,
-                Effect::TriggerLatency => extras.latency_s = value,
-            }
+            param.effect.apply(&mut extras, param.index, value);
         }
         extras
     }

@@ -14,7 +14,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::effect::Effect;
+use super::effects::Effect;
 use super::model::{Param, Problem};
 use super::{Alternative, Fit};
 
@@ -62,21 +62,8 @@ pub(super) enum Assessment {
 
 /// Every parameter of `effect` that could act on these touches.
 fn all_params(problem: &Problem, effect: Effect) -> Vec<Param> {
-    let dof = problem.dof();
-    let indices: Vec<usize> = match effect {
-        Effect::JointOffsets => (0..dof).collect(),
-        Effect::JointCompliance => (0..dof)
-            .filter(|&j| {
-                problem
-                    .gravity_torques_nm
-                    .iter()
-                    .any(|torques| torques.get(j).is_some_and(|t| t.abs() > 1e-9))
-            })
-            .collect(),
-        Effect::TcpOffset => vec![0, 1, 2],
-        Effect::ProbeRadius | Effect::PartScale | Effect::TriggerLatency => vec![0],
-    };
-    indices
+    effect
+        .active_parameters(problem)
         .into_iter()
         .map(|index| Param { effect, index })
         .collect()
@@ -313,22 +300,10 @@ fn unavailable(problem: &Problem, effects: &[Effect]) -> Option<String> {
             flange_only[0]
         ));
     }
-    let has_velocities = problem
-        .touches
+    // (Only effects that fitted alone are paired, so at most one of a pair is unavailable.)
+    effects
         .iter()
-        .all(|t| t.qd.as_ref().is_some_and(|qd| qd.iter().any(|v| *v != 0.0)));
-    if effects.contains(&Effect::TriggerLatency) && !has_velocities {
-        return Some("needs joint velocities at the touches".to_owned());
-    }
-    if effects.contains(&Effect::JointCompliance)
-        && all_params(problem, Effect::JointCompliance).is_empty()
-    {
-        return Some(
-            "no joint carries a gravity torque: the URDF has no inertials and the tool no mass"
-                .to_owned(),
-        );
-    }
-    None
+        .find_map(|effect| effect.unavailable(problem))
 }
 
 fn unseen_reason(problem: &Problem, param: Param, size: f64, sigma: f64, pair: bool) -> String {
@@ -385,10 +360,8 @@ fn implausible(params: &[Param], fit: &Fit) -> Option<String> {
                 "{name} = {value:.3e} leaves the plausibility bound {bound:.3e}"
             ));
         }
-        if param.effect == Effect::JointCompliance && *value < 0.0 {
-            return Some(format!(
-                "{name} = {value:.3e} +- {se:.1e} is negative: a joint does not lean against gravity"
-            ));
+        if let Some(reason) = param.effect.implausible(name, *value, *se) {
+            return Some(reason);
         }
     }
     None
