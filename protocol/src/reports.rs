@@ -85,17 +85,28 @@ pub struct Uncertainty {
     pub least_uncertain_point: Option<[f64; 3]>,
 }
 
+/// The keys every alignment report starts with (DESIGN.md 6.4), written at the top level of
+/// [`AlignReport`] and [`CloudReport`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AlignmentSummary {
+    /// `base_from_part`, with its matrix.
+    pub pose: Pose,
+    pub iterations: usize,
+    pub converged: bool,
+    /// RMS and largest distance of the measurements from the aligned surface, m.
+    pub rms: f64,
+    pub max: f64,
+    pub time_s: f64,
+    /// Each touch's signed distance from the aligned surface; empty for a cloud.
+    pub residuals: Vec<Residual>,
+}
+
 /// DESIGN.md 6.4 keys, plus `ambiguous`, `candidates`, `starts`, `notes`, and from `ips align
 /// SESSION` either `uncertainty` or `uncertainty_error` (why it could not be computed).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AlignReport {
-    pub pose: Pose,
-    pub iterations: usize,
-    pub converged: bool,
-    pub rms: f64,
-    pub max: f64,
-    pub time_s: f64,
-    pub residuals: Vec<Residual>,
+    #[serde(flatten)]
+    pub alignment: AlignmentSummary,
     pub ambiguous: bool,
     pub candidates: Vec<Candidate>,
     pub starts: usize,
@@ -110,13 +121,8 @@ pub struct AlignReport {
 /// point counts are given instead.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CloudReport {
-    pub pose: Pose,
-    pub iterations: usize,
-    pub converged: bool,
-    pub rms: f64,
-    pub max: f64,
-    pub time_s: f64,
-    pub residuals: Vec<Residual>,
+    #[serde(flatten)]
+    pub alignment: AlignmentSummary,
     pub cloud_points: usize,
     pub keypoints: usize,
     pub kept_points: usize,

@@ -312,7 +312,7 @@ fn golden_replies_read_as_their_typed_documents() {
         .body
         .into_data("align-cloud")
         .unwrap();
-    assert!(cloud.pose.matrix.is_some());
+    assert!(cloud.alignment.pose.matrix.is_some());
     let inspection: protocol::Inspection = reply("service_reply_get.json")
         .body
         .into_data("get")

@@ -6,14 +6,14 @@
 //!
 //!     cargo bench -p robot-bridge --bench stream -- [SECONDS] [ur|iiwa]   (default 10 s, both)
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use align_core::robots::ShippedRobot;
+use cell::ChildProcess;
 
 const STATUS: &str = r#"{"header":{"from":"ips","to":"ros","type":"instruction"},"body":{"command":"status","content":"bridge"}}"#;
 const START: &str = r#"{"header":{"from":"ips","to":"ros","type":"instruction"},"body":{"command":"start","content":"hwState"}}"#;
@@ -53,50 +53,12 @@ fn socket(context: &zmq::Context, kind: zmq::SocketType, endpoint: &str) -> zmq:
     socket
 }
 
-/// The bridge binary as a child process, with the endpoints of its READY line.
-struct Bridge {
-    child: Child,
-    endpoints: Vec<(String, String)>,
-}
-
-impl Bridge {
-    fn spawn(args: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_robot-bridge"))
-            .args(args)
-            .args(["--rep", "tcp://127.0.0.1:*", "--pub", "tcp://127.0.0.1:*"])
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("robot-bridge starts");
-        let stdout = child.stdout.take().expect("stdout");
-        let mut line = String::new();
-        BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("READY line");
-        let endpoints = line
-            .split_whitespace()
-            .skip(1)
-            .filter_map(|pair| {
-                pair.split_once('=')
-                    .map(|(k, v)| (k.to_owned(), v.to_owned()))
-            })
-            .collect();
-        Self { child, endpoints }
-    }
-
-    fn endpoint(&self, key: &str) -> &str {
-        self.endpoints
-            .iter()
-            .find(|(k, _)| k == key)
-            .map(|(_, v)| v.as_str())
-            .expect("endpoint in the READY line")
-    }
-}
-
-impl Drop for Bridge {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// The bridge binary as a child process, through the launcher `ips demo` and the tests use.
+fn spawn_bridge(args: &[&str]) -> ChildProcess {
+    let mut args: Vec<String> = args.iter().map(|a| (*a).to_owned()).collect();
+    args.extend(["--rep", "tcp://127.0.0.1:*", "--pub", "tcp://127.0.0.1:*"].map(str::to_owned));
+    let program = Path::new(env!("CARGO_BIN_EXE_robot-bridge"));
+    cell::spawn("robot-bridge", program, &args, cell::READY_WITHIN).expect("robot-bridge starts")
 }
 
 fn main() {
@@ -119,7 +81,7 @@ fn main() {
         })
         .expect("sim-robot");
         let port = sim.rtde_port().expect("port").to_string();
-        let bridge = Bridge::spawn(&[
+        let bridge = spawn_bridge(&[
             "--backend",
             "ur",
             "--robot-host",
@@ -136,7 +98,7 @@ fn main() {
         sim.stop();
     }
     if only.as_deref() != Some("ur") {
-        let bridge = Bridge::spawn(&[
+        let bridge = spawn_bridge(&[
             "--backend",
             "iiwa",
             "--robot-host",
@@ -144,12 +106,7 @@ fn main() {
             "--fri-port",
             "0",
         ]);
-        let port = bridge
-            .endpoint("fri")
-            .rsplit(':')
-            .next()
-            .expect("port")
-            .to_owned();
+        let port = bridge.port("fri").expect("fri endpoint");
         let sim = sim_robot::start(&sim_robot::Config {
             robot: ShippedRobot::Iiwa14,
             rtde_listen: String::new(),
@@ -171,9 +128,13 @@ fn main() {
     }
 }
 
-fn measure(bridge: &Bridge, origin: f64, seconds: f64, label: &str) {
+fn measure(bridge: &ChildProcess, origin: f64, seconds: f64, label: &str) {
     let context = zmq::Context::new();
-    let rep = socket(&context, zmq::REQ, bridge.endpoint("rep"));
+    let rep = socket(
+        &context,
+        zmq::REQ,
+        bridge.endpoint("rep").expect("rep endpoint"),
+    );
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
         rep.send(STATUS, 0).expect("send");
@@ -186,7 +147,11 @@ fn measure(bridge: &Bridge, origin: f64, seconds: f64, label: &str) {
     let stop = Arc::new(AtomicBool::new(false));
     let subscribers: Vec<_> = (0..4)
         .map(|_| {
-            let sub = socket(&context, zmq::SUB, bridge.endpoint("pub"));
+            let sub = socket(
+                &context,
+                zmq::SUB,
+                bridge.endpoint("pub").expect("pub endpoint"),
+            );
             sub.set_subscribe(b"").expect("subscribe");
             let stop = Arc::clone(&stop);
             thread::spawn(move || {

@@ -2,6 +2,7 @@
 //! uncertainty that `ips align SESSION` prints and the service's `align` replies.
 
 use align_core::pose::{matrix_rows, xyz_rpy};
+use align_core::registration::Alignment;
 use align_core::registration::psa::{
     PsaMethod, PsaOptions, PsaResult, PsaTarget, Search, align_touches,
 };
@@ -12,11 +13,25 @@ use align_core::registration::uncertainty::{
 use nalgebra::{Isometry3, Point3, Vector3};
 use protocol::Pose;
 use protocol::reports::{
-    AlignReport, Candidate, Position95, Residual, Rotation95, Uncertainty, WeakDirection,
+    AlignReport, AlignmentSummary, Candidate, Position95, Residual, Rotation95, Uncertainty,
+    WeakDirection,
 };
 
 use crate::BadInput;
 use crate::session::LoadedSession;
+
+/// The keys every alignment report starts with, from what every alignment returns.
+pub fn summary(alignment: &Alignment, residuals: Vec<Residual>) -> AlignmentSummary {
+    AlignmentSummary {
+        pose: report_pose(&alignment.base_from_part),
+        iterations: alignment.iterations,
+        converged: alignment.converged,
+        rms: alignment.rms_m,
+        max: alignment.max_m,
+        time_s: alignment.time_s,
+        residuals,
+    }
+}
 
 /// A pose as reports give it: xyz, rpy and the 4x4 matrix.
 pub fn report_pose(pose: &Isometry3<f64>) -> Pose {
@@ -174,21 +189,16 @@ pub fn uncertainty_json(found: &PoseUncertainty, sigma_source: &str) -> Uncertai
 }
 
 fn output(result: &PsaResult, notes: Vec<String>) -> AlignReport {
+    let residuals = result
+        .residuals
+        .iter()
+        .map(|r| Residual {
+            id: r.id.clone(),
+            distance: r.distance_m,
+        })
+        .collect();
     AlignReport {
-        pose: report_pose(&result.alignment.base_from_part),
-        iterations: result.alignment.iterations,
-        converged: result.alignment.converged,
-        rms: result.alignment.rms_m,
-        max: result.alignment.max_m,
-        time_s: result.alignment.time_s,
-        residuals: result
-            .residuals
-            .iter()
-            .map(|r| Residual {
-                id: r.id.clone(),
-                distance: r.distance_m,
-            })
-            .collect(),
+        alignment: summary(&result.alignment, residuals),
         ambiguous: result.is_ambiguous(),
         candidates: result
             .ambiguous_with

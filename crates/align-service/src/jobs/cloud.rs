@@ -15,7 +15,7 @@ use protocol::reports::CloudReport;
 use protocol::session::PartSection;
 
 use crate::BadInput;
-use crate::jobs::align::report_pose;
+use crate::jobs::align::summary;
 
 /// The start pose's error bound a service request gets when it names none, m. A hand-placed
 /// part in a modelled cell is within 100 mm of its nominal pose; at that delta our method found
@@ -115,13 +115,8 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
     )
     .map_err(|error| BadInput(format!("cannot align: {error}")))?;
     Ok(CloudReport {
-        pose: report_pose(&result.alignment.base_from_part),
-        iterations: result.alignment.iterations,
-        converged: result.alignment.converged,
-        rms: result.alignment.rms_m,
-        max: result.alignment.max_m,
-        time_s: result.alignment.time_s,
-        residuals: Vec::new(),
+        // Thousands of points: no residual per point.
+        alignment: summary(&result.alignment, Vec::new()),
         cloud_points: cloud.len(),
         keypoints: result.keypoints,
         kept_points: result.kept,

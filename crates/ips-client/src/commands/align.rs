@@ -61,23 +61,31 @@ pub fn run(args: &AlignArgs) -> Result<String, CliError> {
 
 /// The report for people: the pose, how the search went, its uncertainty and the residuals.
 pub fn to_text(report: &AlignReport) -> String {
-    let [x, y, z] = report.pose.xyz.map(|v| crate::display_round(v, 6));
-    let [roll, pitch, yaw] = report.pose.rpy.map(|v| crate::display_round(v, 6));
+    let [x, y, z] = report
+        .alignment
+        .pose
+        .xyz
+        .map(|v| crate::display_round(v, 6));
+    let [roll, pitch, yaw] = report
+        .alignment
+        .pose
+        .rpy
+        .map(|v| crate::display_round(v, 6));
     let mut text = format!(
         "base_from_part: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
     );
     text += &format!(
         "{} after {} iterations ({} starts) in {:.1} ms; residual rms {:.4} mm, max {:.4} mm\n",
-        if report.converged {
+        if report.alignment.converged {
             "converged"
         } else {
             "NOT converged"
         },
-        report.iterations,
+        report.alignment.iterations,
         report.starts,
-        report.time_s * 1e3,
-        report.rms * 1e3,
-        report.max * 1e3
+        report.alignment.time_s * 1e3,
+        report.alignment.rms * 1e3,
+        report.alignment.max * 1e3
     );
     if let Some(found) = &report.uncertainty {
         let position = &found.position_95_mm;
@@ -126,7 +134,7 @@ pub fn to_text(report: &AlignReport) -> String {
         }
     }
     text += "residuals (mm):\n";
-    for residual in &report.residuals {
+    for residual in &report.alignment.residuals {
         text += &format!("  {:>6}  {:+.4}\n", residual.id, residual.distance * 1e3);
     }
     for note in &report.notes {

@@ -130,21 +130,29 @@ fn parse_pose(text: &str) -> Result<Pose, BadInput> {
 }
 
 pub fn to_text(report: &CloudReport) -> String {
-    let [x, y, z] = report.pose.xyz.map(|v| crate::display_round(v, 6));
-    let [roll, pitch, yaw] = report.pose.rpy.map(|v| crate::display_round(v, 6));
+    let [x, y, z] = report
+        .alignment
+        .pose
+        .xyz
+        .map(|v| crate::display_round(v, 6));
+    let [roll, pitch, yaw] = report
+        .alignment
+        .pose
+        .rpy
+        .map(|v| crate::display_round(v, 6));
     let mut text = format!(
         "base_from_part: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
     );
     text += &format!(
         "{} after {} iterations ({} runs) in {:.1} ms\n",
-        if report.converged {
+        if report.alignment.converged {
             "converged"
         } else {
             "NOT converged (iteration limit)"
         },
-        report.iterations,
+        report.alignment.iterations,
         report.starts,
-        report.time_s * 1e3
+        report.alignment.time_s * 1e3
     );
     text += &format!(
         "{} cloud points -> {} keypoints, {} kept within {:.1} mm of the part: rms {:.3} mm, max {:.3} mm\n",
@@ -152,8 +160,8 @@ pub fn to_text(report: &CloudReport) -> String {
         report.keypoints,
         report.kept_points,
         report.final_delta * 1e3,
-        report.rms * 1e3,
-        report.max * 1e3
+        report.alignment.rms * 1e3,
+        report.alignment.max * 1e3
     );
     for note in &report.notes {
         text += &format!("note: {note}\n");

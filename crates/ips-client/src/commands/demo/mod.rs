@@ -157,7 +157,7 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
         )
     };
     let isometry = |pose: &Pose| isometry_from_xyz_rpy(pose.xyz, pose.rpy);
-    let (pose_error_m, pose_error_rad) = error(&isometry(&aligned.pose));
+    let (pose_error_m, pose_error_rad) = error(&isometry(&aligned.alignment.pose));
     let (nominal_error_m, nominal_error_rad) = error(&scene.base_from_part_nominal);
     let (pose_error_after_diagnosis_m, pose_error_after_diagnosis_rad) =
         error(&isometry(&diagnosis.pose_after));
@@ -179,9 +179,9 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
         pose_error_rad,
         nominal_error_m,
         nominal_error_rad,
-        rms_m: aligned.rms,
-        align_time_s: aligned.time_s,
-        pose: aligned.pose,
+        rms_m: aligned.alignment.rms,
+        align_time_s: aligned.alignment.time_s,
+        pose: aligned.alignment.pose,
         truth: scene.truth_pose(),
     })
 }
