@@ -1,6 +1,8 @@
 //! `ips start|stop|get|list|remove|reset|save|load|status`: one request to a running `ips
 //! serve`, printed for people or as the reply's JSON document with `--json`.
 
+use std::time::Duration;
+
 use clap::Args;
 use protocol::session::Inspection;
 use protocol::{
@@ -20,6 +22,10 @@ pub struct ServiceArgs {
     /// Print the reply's JSON document.
     #[arg(long)]
     pub json: bool,
+    /// How long to wait for the reply, s (the service answers in turn: a request may wait
+    /// behind a diagnose).
+    #[arg(long, value_name = "SECONDS", default_value_t = 30.0)]
+    pub timeout: f64,
 }
 
 #[derive(Debug, Args)]
@@ -55,7 +61,15 @@ fn call<T: DeserializeOwned + Serialize>(
     command: ServiceCommand,
     text: impl FnOnce(&T) -> String,
 ) -> Result<String, CliError> {
-    let reply: T = client::request(&args.service, command)?;
+    if !(args.timeout.is_finite() && args.timeout > 0.0) {
+        return Err(BadInput(format!(
+            "--timeout must be a positive number of seconds, got {}",
+            args.timeout
+        ))
+        .into());
+    }
+    let timeout = Duration::from_secs_f64(args.timeout.min(86_400.0));
+    let reply: T = client::request_within(&args.service, command, timeout)?;
     if args.json {
         json_line(&reply)
     } else {
