@@ -166,6 +166,30 @@ pub fn base_from_flange(
     }
 }
 
+/// How far past a joint's limit a reported value may lie before it is refused, rad (or m): a
+/// controller reports the measured position, which can overshoot a limit by encoder noise.
+const LIMIT_TOLERANCE: f64 = 1e-3;
+
+/// Checks an inspection as the service would have captured it from `chain`: its pose is
+/// computable (one of `q` and `flange_pose`, the right joint count, finite values) and its joints
+/// lie within their limits, where a value such as 1e300 or a joint in degrees shows.
+pub fn check_inspection(inspection: &Inspection, chain: &Chain) -> Result<(), BadInput> {
+    base_from_flange(inspection, Some(chain))?;
+    let Some(q) = &inspection.q else {
+        return Ok(());
+    };
+    for (joint, &value) in chain.joints().iter().zip(q) {
+        let (lower, upper) = (joint.limits.lower, joint.limits.upper);
+        if value < lower - LIMIT_TOLERANCE || value > upper + LIMIT_TOLERANCE {
+            return Err(BadInput(format!(
+                "inspection '{}': joint '{}' = {value} is outside its limits [{lower}, {upper}] (rad or m)",
+                inspection.id, joint.name
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// `[x, y, z, rx, ry, rz]` (m, rotation vector in rad) as an isometry. A rotation vector longer
 /// than pi is refused rather than wrapped: controllers report angles in [0, pi], so a longer one
 /// is a unit mistake (degrees) or a corrupt value.

@@ -1,5 +1,6 @@
 //! The request thread: one handler per [`ServiceCommand`], each returning its typed reply.
 
+use std::panic::AssertUnwindSafe;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,7 +23,7 @@ use super::samples::{JointSample, Samples};
 use super::{Config, socket};
 use crate::BadInput;
 use crate::jobs::{align, cloud, diagnose};
-use crate::session::{LoadedSession, parse_session_file};
+use crate::session::{LoadedSession, check_inspection, parse_session_file};
 
 /// Why a request was refused; its text is the reply's `reason`.
 #[derive(Debug, thiserror::Error)]
@@ -73,6 +74,27 @@ fn reply<T: Serialize>(result: Handled<T>) -> ServiceReply {
     }
 }
 
+/// Runs `handle` on `request`, answering with an internal error instead of unwinding through
+/// the request loop when it panics: one request's bug must not take down the service and every
+/// client with it. The panic itself is logged by the panic hook (stderr). Handlers journal a
+/// change before they make it, so a handler that fails midway leaves the journal consistent.
+pub(crate) fn guarded(request: &[u8], handle: impl FnOnce(&[u8]) -> ServiceReply) -> ServiceReply {
+    match std::panic::catch_unwind(AssertUnwindSafe(|| handle(request))) {
+        Ok(reply) => reply,
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_owned())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic without a message".to_owned());
+            eprintln!("ips serve: internal error while handling a request: {what}");
+            protocol::service_reply_error(format!(
+                "internal error: {what} (a bug: the request was not carried out; the service keeps serving)"
+            ))
+        }
+    }
+}
+
 impl Service {
     pub(crate) fn serve(&mut self, rep: &zmq::Socket, stop: &AtomicBool) {
         while !stop.load(Ordering::Relaxed) {
@@ -84,7 +106,7 @@ impl Service {
             while rep.get_rcvmore().unwrap_or(false) {
                 let _ = rep.recv_bytes(0);
             }
-            let reply = self.handle(&request);
+            let reply = guarded(&request, |bytes| self.handle(bytes));
             let text = protocol::to_json(&reply).unwrap_or_default();
             let _ = rep.send(text.as_bytes(), 0);
         }
@@ -328,6 +350,12 @@ impl Service {
         let text =
             std::fs::read_to_string(&path).map_err(|e| format!("cannot read '{path}': {e}"))?;
         let file = parse_session_file(&text, &path)?;
+        // Checked before anything is journaled: a bad inspection in the journal would fail every
+        // align after it, and every restart.
+        for inspection in &file.inspections {
+            check_inspection(inspection, &self.chain)
+                .map_err(|error| BadInput(format!("session '{path}': {error}")))?;
+        }
         // One journal entry, so a crash leaves either the old list or the new one.
         self.journal(&JournalEntry::Load {
             inspections: file.inspections.clone(),
@@ -337,5 +365,31 @@ impl Service {
         Ok(InspectionCountReply {
             inspections: self.inspections.len(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reason(reply: &ServiceReply) -> Option<String> {
+        reply.body.reason.clone()
+    }
+
+    #[test]
+    fn a_handler_that_panics_gets_an_internal_error_reply_and_the_next_request_is_served() {
+        let failed = guarded(b"{}", |_| panic!("index out of bounds: the len is 0"));
+        assert!(!failed.body.ok);
+        let why = reason(&failed).unwrap();
+        assert!(
+            why.starts_with("internal error: index out of bounds"),
+            "{why}"
+        );
+        let formatted = guarded(b"{}", |_| panic!("{} touches", 3));
+        assert!(reason(&formatted).unwrap().contains("3 touches"));
+        let served = guarded(b"{}", |_| {
+            protocol::service_reply_ok(&InspectionCountReply { inspections: 2 }).unwrap()
+        });
+        assert!(served.body.ok);
     }
 }

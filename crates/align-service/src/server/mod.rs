@@ -29,6 +29,8 @@ mod handlers;
 mod journal;
 mod samples;
 
+pub use journal::JournalReport;
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -77,6 +79,8 @@ pub enum ServiceError {
 #[derive(Debug)]
 pub struct Handle {
     pub rep_endpoint: String,
+    /// What replaying the journal found: entries, corrupt lines skipped, a torn tail cut off.
+    pub journal_report: JournalReport,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
 }
@@ -98,14 +102,15 @@ impl Drop for Handle {
 }
 
 /// Runs the service until `shutdown` returns (the binary's blocks until SIGINT or SIGTERM);
-/// `on_ready` gets the bound REP endpoint once the service answers requests.
+/// `on_ready` gets the running service (its bound REP endpoint, the journal's report) once it
+/// answers requests.
 pub fn run(
     config: &Config,
-    on_ready: impl FnOnce(&str),
+    on_ready: impl FnOnce(&Handle),
     shutdown: impl FnOnce(),
 ) -> Result<(), ServiceError> {
     let handle = start(config)?;
-    on_ready(&handle.rep_endpoint);
+    on_ready(&handle);
     shutdown();
     handle.stop();
     Ok(())
@@ -165,6 +170,10 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     };
     let replayed = journal::replay(&config.journal)?;
     let mut journal = journal::Journal::open(&config.journal)?;
+    let journal_report = replayed
+        .as_ref()
+        .map(|replayed| replayed.report.clone())
+        .unwrap_or_default();
     let (inspections, highest_id) = match replayed {
         Some(replayed) => (replayed.inspections, replayed.highest_id),
         None => {
@@ -234,6 +243,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     }
     Ok(Handle {
         rep_endpoint,
+        journal_report,
         stop,
         threads,
     })

@@ -51,7 +51,12 @@ pub fn run(args: &ServeArgs) -> Result<String, CliError> {
         .map_err(|error| CliError::Failure(format!("cannot handle signals: {error}")))?;
     server::run(
         &args.config(),
-        |endpoint| println!("READY rep={endpoint}"),
+        |service| {
+            for warning in service.journal_report.warnings() {
+                eprintln!("ips serve: warning: {warning}");
+            }
+            println!("READY rep={}", service.rep_endpoint);
+        },
         || {
             signals.forever().next();
         },

@@ -1,0 +1,135 @@
+//! Requests the fault test sent the service: refused with a reason that names what is wrong,
+//! nothing journaled, and the service keeps serving.
+
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+use std::path::{Path, PathBuf};
+
+use align_service::server::{Config, Handle, start};
+use serde_json::{Value, json};
+
+fn example(file: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/step_block_ur10")
+        .join(file)
+}
+
+struct Fixture {
+    service: Handle,
+    socket: zmq::Socket,
+    folder: PathBuf,
+    _context: zmq::Context,
+}
+
+impl Fixture {
+    fn start(name: &str) -> Self {
+        let folder = std::env::temp_dir().join(format!(
+            "cobot-align-requests-{name}-{}",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_dir_all(&folder);
+        std::fs::create_dir_all(&folder).unwrap();
+        let service = start(&Config {
+            session: example("session.json"),
+            journal: folder.join("inspections.journal"),
+            rep: "tcp://127.0.0.1:*".to_owned(),
+            // No bridge: these requests never reach it.
+            bridge_rep: "tcp://127.0.0.1:1".to_owned(),
+            bridge_pub: "tcp://127.0.0.1:1".to_owned(),
+            max_sample_age_s: 0.1,
+            max_tool_speed_m_s: 0.005,
+        })
+        .unwrap();
+        let context = zmq::Context::new();
+        let socket = context.socket(zmq::REQ).unwrap();
+        socket.set_linger(0).unwrap();
+        socket.set_rcvtimeo(10_000).unwrap();
+        socket.connect(&service.rep_endpoint).unwrap();
+        Self {
+            service,
+            socket,
+            folder,
+            _context: context,
+        }
+    }
+
+    fn send(&self, text: &str) -> Value {
+        self.socket.send(text.as_bytes(), 0).unwrap();
+        serde_json::from_slice(&self.socket.recv_bytes(0).unwrap()).unwrap()
+    }
+
+    fn call(&self, body: Value) -> Value {
+        let request =
+            json!({"header": {"from": "ips", "to": "align", "type": "request"}, "body": body});
+        self.send(&request.to_string())["body"].clone()
+    }
+
+    fn journal_len(&self) -> u64 {
+        std::fs::metadata(self.folder.join("inspections.journal"))
+            .unwrap()
+            .len()
+    }
+
+    fn finish(self) {
+        self.service.stop();
+        let _ = std::fs::remove_dir_all(&self.folder);
+    }
+}
+
+#[test]
+fn arrays_in_place_of_objects_are_refused_and_nothing_is_wiped() {
+    let fixture = Fixture::start("arrays");
+    let before = fixture.journal_len();
+    let reply = fixture.send(r#"[["a","b","c"],["reset"]]"#);
+    assert_eq!(reply["body"]["ok"], false, "{reply}");
+    let reason = reply["body"]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("expected a JSON object, got an array"),
+        "{reason}"
+    );
+    assert_eq!(fixture.journal_len(), before);
+    assert_eq!(
+        fixture.call(json!({"command": "status"}))["data"]["inspections"],
+        9
+    );
+    fixture.finish();
+}
+
+#[test]
+fn load_refuses_inspections_the_robot_could_not_have_reported_before_journaling() {
+    let fixture = Fixture::start("load");
+    let template: Value =
+        serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
+    let cases = [
+        (
+            json!([0.1, -1.2, 1.4, -1.8, -1.57]),
+            "expected 6 joint values",
+        ),
+        (json!([]), "expected 6 joint values"),
+        (
+            json!([1e300, -1.2, 1.4, -1.8, -1.57, 0.0]),
+            "outside its limits",
+        ),
+    ];
+    for (index, (q, reason)) in cases.into_iter().enumerate() {
+        let mut session = template.clone();
+        session["inspections"][3]["q"] = q.clone();
+        // The example's relative paths are the service's session folder's.
+        session["robot"]["urdf"] = json!(example("../../robots/ur10.urdf").to_str().unwrap());
+        session["part"]["mesh"] = json!(example("step_block.stl").to_str().unwrap());
+        let path = fixture.folder.join(format!("bad{index}.json"));
+        std::fs::write(&path, session.to_string()).unwrap();
+        let before = fixture.journal_len();
+        let reply = fixture.call(json!({"command": "load", "path": path.to_str().unwrap()}));
+        assert_eq!(reply["ok"], false, "{q}: {reply}");
+        let why = reply["reason"].as_str().unwrap();
+        assert!(
+            why.contains(reason) && why.contains("inspection '4'"),
+            "{q}: {why}"
+        );
+        assert_eq!(fixture.journal_len(), before, "{q}: journaled anyway");
+        let aligned = fixture.call(json!({"command": "align"}));
+        assert_eq!(aligned["ok"], true, "{q}: the next align fails: {aligned}");
+    }
+    fixture.finish();
+}
