@@ -85,6 +85,7 @@ fn mirror_through(side: RobotSide) -> Vec<(String, Command)> {
         bridge_pub,
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
+        data_dirs: Vec::new(),
     })
     .unwrap();
     let client = socket(&context, zmq::REQ);
@@ -144,6 +145,7 @@ fn nonsense_limits_are_refused_before_the_service_starts() {
             bridge_pub: "tcp://127.0.0.1:1".to_owned(),
             max_sample_age_s: age_s,
             max_tool_speed_m_s: speed_m_s,
+            data_dirs: Vec::new(),
         })
         .unwrap_err();
         assert!(

@@ -38,6 +38,7 @@ impl Fixture {
             bridge_pub: "tcp://127.0.0.1:1".to_owned(),
             max_sample_age_s: 0.1,
             max_tool_speed_m_s: 0.005,
+            data_dirs: vec![folder.clone()],
         })
         .unwrap();
         let context = zmq::Context::new();
@@ -132,4 +133,59 @@ fn load_refuses_inspections_the_robot_could_not_have_reported_before_journaling(
         assert_eq!(aligned["ok"], true, "{q}: the next align fails: {aligned}");
     }
     fixture.finish();
+}
+
+#[test]
+fn files_outside_the_data_directories_fifos_and_devices_are_refused_without_stalling() {
+    let fixture = Fixture::start("files");
+    let fifo = fixture.folder.join("fifo.json");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let cases = [
+        (
+            json!({"command": "load", "path": fifo.to_str().unwrap()}),
+            "is not a regular file",
+        ),
+        (
+            json!({"command": "load", "path": "/dev/zero"}),
+            "outside the service's data directories",
+        ),
+        (
+            json!({"command": "load", "path": example("session.json").to_str().unwrap()}),
+            "outside the service's data directories",
+        ),
+        (
+            json!({"command": "save", "path": "/tmp/../etc/cobot-align-should-not-exist.json"}),
+            "outside the service's data directories",
+        ),
+        (
+            json!({"command": "align-cloud", "cloud": example("scan.xyz").to_str().unwrap()}),
+            "outside the service's data directories",
+        ),
+    ];
+    for (request, reason) in cases {
+        // A FIFO would block a plain read until a writer comes: the reply arrives at once.
+        let reply = fixture.call(request.clone());
+        assert_eq!(reply["ok"], false, "{request}: {reply}");
+        let why = reply["reason"].as_str().unwrap();
+        assert!(why.contains(reason), "{request}: {why}");
+        assert_eq!(fixture.call(json!({"command": "status"}))["ok"], true);
+    }
+    // Inside the data directory, save and load work.
+    let saved = fixture.folder.join("saved.json");
+    let reply = fixture.call(json!({"command": "save", "path": saved.to_str().unwrap()}));
+    assert_eq!(reply["ok"], true, "{reply}");
+    let reply = fixture.call(json!({"command": "load", "path": saved.to_str().unwrap()}));
+    assert_eq!(reply["data"]["inspections"], 9, "{reply}");
+    fixture.finish();
+}
+
+#[test]
+fn the_vendored_libzmq_has_no_curve_as_the_readme_says() {
+    // The README's security notes say the sockets are unauthenticated and unencrypted; this
+    // pins the fact they rest on.
+    assert_ne!(zmq::has("curve"), Some(true));
 }

@@ -190,6 +190,7 @@ fn main() {
         bridge_pub: endpoint(&bridge_pub),
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
+        data_dirs: vec![folder.clone()],
     })
     .expect("service starts");
     let client = socket(&context, zmq::REQ);

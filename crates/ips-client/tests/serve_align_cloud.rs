@@ -71,6 +71,7 @@ impl Fixture {
             bridge_pub: endpoint(&bridge_pub),
             max_sample_age_s: 0.1,
             max_tool_speed_m_s: 0.005,
+            data_dirs: vec![folder.clone(), example("")],
         })
         .unwrap();
         let client = socket(&context, zmq::REQ);

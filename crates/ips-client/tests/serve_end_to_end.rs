@@ -115,6 +115,7 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         bridge_pub: bridge.pub_endpoint.clone(),
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
+        data_dirs: vec![folder.clone()],
     };
     let service = serve(&config);
     let context = zmq::Context::new();
@@ -340,6 +341,7 @@ fn a_bridge_restart_mid_session_is_recovered() {
         bridge_pub: pub_endpoint.clone(),
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
+        data_dirs: vec![folder.clone()],
     });
     let context = zmq::Context::new();
     let client = req(&context, &service.rep_endpoint);

@@ -18,6 +18,9 @@ use protocol::{
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use super::files::{
+    CLOUD_FILE_LIMIT_BYTES, FileAccess, MESH_FILE_LIMIT_BYTES, SESSION_FILE_LIMIT_BYTES,
+};
 use super::journal::{Journal, highest_id};
 use super::samples::{JointSample, Samples};
 use super::{Config, socket};
@@ -60,6 +63,8 @@ pub(crate) struct Service {
     pub context: zmq::Context,
     /// How the bridge names itself in headers (`ros`, `IiwaDrive`), learnt from its status.
     pub bridge_side: Option<RobotSide>,
+    /// The files requests may name.
+    pub files: FileAccess,
     pub chain: Chain,
     pub tool: Tool,
 }
@@ -310,7 +315,13 @@ impl Service {
     }
 
     fn align_cloud(&self, request: &AlignCloudRequest) -> Handled<CloudReport> {
-        let job = cloud::from_request(request, &self.template.part, &self.folder)?;
+        let mut job = cloud::from_request(request, &self.template.part, &self.folder)?;
+        job.cloud = self
+            .files
+            .readable(&request.cloud, CLOUD_FILE_LIMIT_BYTES, "scanner cloud")?;
+        if let Some(mesh) = &request.mesh {
+            job.mesh = self.files.readable(mesh, MESH_FILE_LIMIT_BYTES, "mesh")?;
+        }
         Ok(cloud::align(&job)?)
     }
 
@@ -339,7 +350,8 @@ impl Service {
         }
         let text = serde_json::to_string_pretty(&file)
             .map_err(|e| RequestError::Refused(e.to_string()))?;
-        std::fs::write(&path, text + "\n").map_err(|e| format!("cannot write '{path}': {e}"))?;
+        let target = self.files.writable(&path)?;
+        std::fs::write(&target, text + "\n").map_err(|e| format!("cannot write '{path}': {e}"))?;
         Ok(SavedReply {
             inspections: file.inspections.len(),
             path,
@@ -347,8 +359,11 @@ impl Service {
     }
 
     fn load(&mut self, path: String) -> Handled<InspectionCountReply> {
+        let source = self
+            .files
+            .readable(&path, SESSION_FILE_LIMIT_BYTES, "session file")?;
         let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("cannot read '{path}': {e}"))?;
+            std::fs::read_to_string(&source).map_err(|e| format!("cannot read '{path}': {e}"))?;
         let file = parse_session_file(&text, &path)?;
         // Checked before anything is journaled: a bad inspection in the journal would fail every
         // align after it, and every restart.

@@ -25,6 +25,7 @@
 //! thread and is never blocked by requests, so the live sample a `get` takes after a slow
 //! request is as fresh as ever.
 
+mod files;
 mod handlers;
 mod journal;
 mod samples;
@@ -55,6 +56,9 @@ pub struct Config {
     pub max_sample_age_s: f64,
     /// Fastest tool a `get` accepts, m/s.
     pub max_tool_speed_m_s: f64,
+    /// The only directories whose regular files `load`, `save` and `align-cloud` may name;
+    /// empty means the session file's folder.
+    pub data_dirs: Vec<PathBuf>,
 }
 
 /// Why the service could not start.
@@ -158,6 +162,16 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     })?;
     let template = parse_session_file(&text, &config.session.display().to_string())?;
     let folder = config.session.parent().unwrap_or(Path::new(".")).to_owned();
+    let files = if config.data_dirs.is_empty() {
+        let session_folder = if folder.as_os_str().is_empty() {
+            PathBuf::from(".")
+        } else {
+            folder.clone()
+        };
+        files::FileAccess::new(&[session_folder])?
+    } else {
+        files::FileAccess::new(&config.data_dirs)?
+    };
     // Check robot, tool and part now rather than at the first align.
     let loaded = LoadedSession::resolve(template.clone(), &folder)?;
     // The service turns the robot's joint states into touches: it needs the robot.
@@ -231,6 +245,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         config: config.clone(),
         context,
         bridge_side: None,
+        files,
         chain,
         tool: loaded.tool,
     };

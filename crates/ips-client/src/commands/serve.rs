@@ -29,6 +29,10 @@ pub struct ServeArgs {
     /// Fastest tool a `get` accepts, m/s.
     #[arg(long, default_value_t = 0.005)]
     pub max_tool_speed: f64,
+    /// A directory whose regular files `load`, `save` and `align-cloud` requests may name;
+    /// repeatable. Without it, only the session file's folder.
+    #[arg(long = "data-dir", value_name = "DIR")]
+    pub data_dirs: Vec<PathBuf>,
 }
 
 impl ServeArgs {
@@ -41,6 +45,7 @@ impl ServeArgs {
             bridge_pub: self.bridge_pub.clone(),
             max_sample_age_s: self.max_sample_age,
             max_tool_speed_m_s: self.max_tool_speed,
+            data_dirs: self.data_dirs.clone(),
         }
     }
 }
