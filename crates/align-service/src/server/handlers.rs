@@ -92,7 +92,7 @@ pub(crate) fn guarded(request: &[u8], handle: impl FnOnce(&[u8]) -> ServiceReply
                 .map(|s| (*s).to_owned())
                 .or_else(|| panic.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "a panic without a message".to_owned());
-            eprintln!("ips serve: internal error while handling a request: {what}");
+            tracing::error!(panic = %what, "internal error while handling a request");
             protocol::service_reply_error(format!(
                 "internal error: {what} (a bug: the request was not carried out; the service keeps serving)"
             ))
@@ -111,7 +111,15 @@ impl Service {
             while rep.get_rcvmore().unwrap_or(false) {
                 let _ = rep.recv_bytes(0);
             }
+            let started = std::time::Instant::now();
             let reply = guarded(&request, |bytes| self.handle(bytes));
+            tracing::debug!(
+                ok = reply.body.ok,
+                bytes = request.len(),
+                elapsed_ms = started.elapsed().as_secs_f64() * 1e3,
+                reason = reply.body.reason.as_deref().unwrap_or(""),
+                "request answered"
+            );
             let text = protocol::to_json(&reply).unwrap_or_default();
             let _ = rep.send(text.as_bytes(), 0);
         }
@@ -126,8 +134,12 @@ impl Service {
     fn handle(&mut self, bytes: &[u8]) -> ServiceReply {
         let request = match protocol::parse_service_request(bytes) {
             Ok(request) => request,
-            Err(error) => return reply::<()>(Err(error.into())),
+            Err(error) => {
+                tracing::warn!(%error, bytes = bytes.len(), "malformed request refused");
+                return reply::<()>(Err(error.into()));
+            }
         };
+        tracing::debug!(command = request.body.name(), "request");
         match request.body {
             ServiceCommand::Status => reply(Ok(self.status())),
             ServiceCommand::Start => reply(self.set_mirroring(true)),
@@ -147,7 +159,10 @@ impl Service {
     }
 
     fn journal(&mut self, entry: &JournalEntry) -> Handled<()> {
-        self.journal.append(entry).map_err(RequestError::Refused)
+        self.journal.append(entry).map_err(|reason| {
+            tracing::warn!(%reason, "journal write failed: the change is refused");
+            RequestError::Refused(reason)
+        })
     }
 
     /// What `save` would write: the template's robot, tool and part with the inspections in

@@ -52,13 +52,14 @@ impl ServeArgs {
 
 /// Serves until a signal; prints `READY rep=ENDPOINT` on stdout once requests are answered.
 pub fn run(args: &ServeArgs) -> Result<String, CliError> {
+    init_logs();
     let mut signals = Signals::new([SIGINT, SIGTERM])
         .map_err(|error| CliError::Failure(format!("cannot handle signals: {error}")))?;
     server::run(
         &args.config(),
         |service| {
             for warning in service.journal_report.warnings() {
-                eprintln!("ips serve: warning: {warning}");
+                tracing::warn!("{warning}");
             }
             println!("READY rep={}", service.rep_endpoint);
         },
@@ -71,4 +72,17 @@ pub fn run(args: &ServeArgs) -> Result<String, CliError> {
         other => CliError::Failure(other.to_string()),
     })?;
     Ok(String::new())
+}
+
+/// Logs to stderr at the levels `RUST_LOG` names (default `info`; `RUST_LOG=debug` adds one
+/// line per request); stdout carries only the READY line.
+fn init_logs() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    // A second initialisation (never in the binary) is harmless: the first subscriber stays.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
 }
