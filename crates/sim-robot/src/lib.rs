@@ -2,8 +2,9 @@
 //! bridge's real back-end code runs in every test.
 //!
 //! UR mode serves RTDE ([`rtde_server`]). The joints follow a scripted [`Motion`], a function of
-//! the controller clock, so every sample's ground truth can be recomputed exactly. A ZeroMQ REP
-//! control socket lets tests script the robot and read the truth:
+//! the controller clock, so every sample's ground truth can be recomputed exactly. A ZeroMQ
+//! control socket (REQ clients see a REP; module `control`) lets tests script the robot and read
+//! the truth:
 //!
 //! | request (JSON) | reply |
 //! | --- | --- |
@@ -16,7 +17,8 @@
 //! | `{"command":"effects","joint_offsets":[...],"compliance_rad_per_nm":[...],"payload":{...},"cyclic_encoder":{...},"noise_sigma_rad":s}` | what the encoders report differs from the true joint angles, undeclared to everyone else (module `effects`; absent fields are no effect) |
 //! | `{"command":"probe","mesh":PATH,"base_from_part":{"xyz","rpy"},"tcp":{"xyz","rpy"},"tip_radius":m,...}` | plans 3-2-1 touches on the part at that (hidden) pose and runs them: `{"ok":true,"touches":n,"contacts":[{"from_s","until_s"}],"tilts_rad":[...],"end_s"}`; status then carries `"probe":{"touches","active_touch","at_rest","done"}` (module `probing`) |
 //!
-//! Errors reply `{"ok":false,"reason":"..."}`. `q` is where the joints really are; `reported_q`
+//! Errors reply `{"ok":false,"reason":"..."}`, among them requests of more than one frame, over
+//! 64 KiB ([`MAX_REQUEST_BYTES`]), or with arrays where objects belong. `q` is where the joints really are; `reported_q`
 //! what the controller streams (they differ by the encoder offsets of `effects`).
 //!
 //! iiwa mode emulates the Sunrise cabinet's FRI side ([`fri_server`]): a monitoring message to
@@ -348,8 +350,8 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
     let control = context.socket(zmq::ROUTER).map_err(control_error)?;
     control.set_linger(0).map_err(control_error)?;
     control.set_rcvtimeo(100).map_err(control_error)?;
-    // A reply to a client that stopped reading must not hold up every other client (a ROUTER
-    // drops it rather than block, this bounds the rest).
+    // A reply to a client that stopped reading must not hold up every other client; a ROUTER
+    // drops such a reply rather than block, and the timeout bounds any other wait.
     control.set_sndtimeo(1000).map_err(control_error)?;
     // Frames past this size drop their peer unread (libzmq): a bound on what one client can
     // make the simulator allocate. Between MAX_REQUEST_BYTES and this, requests are refused
