@@ -2,8 +2,9 @@
 //! bridge's real back-end code runs in every test.
 //!
 //! UR mode serves RTDE ([`rtde_server`]). The joints follow a scripted [`Motion`], a function of
-//! the controller clock, so every sample's ground truth can be recomputed exactly. A ZeroMQ REP
-//! control socket lets tests script the robot and read the truth:
+//! the controller clock, so every sample's ground truth can be recomputed exactly. A ZeroMQ
+//! control socket (REQ clients see a REP; module `control`) lets tests script the robot and read
+//! the truth:
 //!
 //! | request (JSON) | reply |
 //! | --- | --- |
@@ -16,7 +17,8 @@
 //! | `{"command":"effects","joint_offsets":[...],"compliance_rad_per_nm":[...],"payload":{...},"cyclic_encoder":{...},"noise_sigma_rad":s}` | what the encoders report differs from the true joint angles, undeclared to everyone else (module `effects`; absent fields are no effect) |
 //! | `{"command":"probe","mesh":PATH,"base_from_part":{"xyz","rpy"},"tcp":{"xyz","rpy"},"tip_radius":m,...}` | plans 3-2-1 touches on the part at that (hidden) pose and runs them: `{"ok":true,"touches":n,"contacts":[{"from_s","until_s"}],"tilts_rad":[...],"end_s"}`; status then carries `"probe":{"touches","active_touch","at_rest","done"}` (module `probing`) |
 //!
-//! Errors reply `{"ok":false,"reason":"..."}`. `q` is where the joints really are; `reported_q`
+//! Errors reply `{"ok":false,"reason":"..."}`, among them requests of more than one frame, over
+//! 64 KiB ([`MAX_REQUEST_BYTES`]), or with arrays where objects belong. `q` is where the joints really are; `reported_q`
 //! what the controller streams (they differ by the encoder offsets of `effects`).
 //!
 //! iiwa mode emulates the Sunrise cabinet's FRI side ([`fri_server`]): a monitoring message to
@@ -26,6 +28,7 @@
 //! stops sending and `drop` closes the FRI session (a new one starts from sequence 0 on a new
 //! source port).
 
+mod control;
 mod effects;
 mod fri_server;
 pub mod motion;
@@ -40,10 +43,10 @@ use std::time::{Duration, Instant};
 
 use align_core::kinematics::Chain;
 use align_core::robots::ShippedRobot;
+pub use control::MAX_REQUEST_BYTES;
 pub use motion::Motion;
 use motion::Trajectory;
 use nalgebra::{DVector, Isometry3, Vector3};
-use protocol::sim::{self, SimCommand};
 
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -94,6 +97,9 @@ pub enum SimError {
     #[error("robot model: {0}")]
     Model(String),
 }
+
+/// The largest frame the control socket accepts at all (see [`MAX_REQUEST_BYTES`]).
+const CONTROL_MAX_FRAME_BYTES: i64 = 1024 * 1024;
 
 /// One controller sample.
 pub(crate) struct Sample {
@@ -340,9 +346,19 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         endpoint: config.control.clone(),
         source,
     };
-    let control = context.socket(zmq::REP).map_err(control_error)?;
+    // A ROUTER doing REP's part (module `control` says why); REQ clients see a REP.
+    let control = context.socket(zmq::ROUTER).map_err(control_error)?;
     control.set_linger(0).map_err(control_error)?;
     control.set_rcvtimeo(100).map_err(control_error)?;
+    // A reply to a client that stopped reading must not hold up every other client; a ROUTER
+    // drops such a reply rather than block, and the timeout bounds any other wait.
+    control.set_sndtimeo(1000).map_err(control_error)?;
+    // Frames past this size drop their peer unread (libzmq): a bound on what one client can
+    // make the simulator allocate. Between MAX_REQUEST_BYTES and this, requests are refused
+    // with a reason.
+    control
+        .set_maxmsgsize(CONTROL_MAX_FRAME_BYTES)
+        .map_err(control_error)?;
     control.bind(&config.control).map_err(control_error)?;
     let control_endpoint = control
         .get_last_endpoint()
@@ -373,7 +389,9 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
     {
         let shared = Arc::clone(&shared);
         let robot = config.robot;
-        threads.push(thread::spawn(move || control_loop(control, shared, robot)));
+        threads.push(thread::spawn(move || {
+            control::control_loop(control, shared, robot)
+        }));
     }
     let clock_origin_unix_s = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -435,120 +453,4 @@ fn fri_link(settings: &FriSettings) -> Result<(UdpSocket, fri_server::FriLink), 
             receive_multiplier: settings.receive_multiplier,
         },
     ))
-}
-
-fn control_loop(socket: zmq::Socket, shared: Arc<Shared>, robot: ShippedRobot) {
-    while !shared.shutdown.load(Ordering::Relaxed) {
-        let request = match socket.recv_bytes(0) {
-            Ok(request) => request,
-            Err(zmq::Error::EAGAIN) => continue,
-            Err(_) => break,
-        };
-        let reply = handle_control(&request, &shared, robot);
-        if socket.send(reply.as_bytes(), 0).is_err() {
-            break;
-        }
-    }
-}
-
-fn handle_control(request: &[u8], shared: &Shared, robot: ShippedRobot) -> String {
-    let command = match sim::parse_command(request) {
-        Ok(command) => command,
-        Err(reason) => return sim::reply_error(&reason),
-    };
-    let done = || sim::reply_ok(&sim::Done {});
-    match command {
-        SimCommand::Status => sim::reply_ok(&status(shared, robot)),
-        SimCommand::Truth => {
-            let sample = shared.sample();
-            sim::reply_ok(&sim::Truth {
-                q: sample.true_q,
-                qd: sample.qd,
-                reported_q: sample.q,
-                time: sample.time_s,
-            })
-        }
-        SimCommand::TruthAt { time } => {
-            if !time.is_finite() {
-                return sim::reply_error("truth_at needs a finite 'time' in s");
-            }
-            let sample = shared.sample_at(time);
-            sim::reply_ok(&sim::Truth {
-                q: sample.true_q,
-                qd: sample.qd,
-                reported_q: sample.q,
-                time,
-            })
-        }
-        SimCommand::Motion { motion } => match motion.check(&shared.limits) {
-            Ok(()) => {
-                shared.set_motion(motion);
-                // A scripted motion replaces any probe run.
-                *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = None;
-                done()
-            }
-            Err(reason) => sim::reply_error(&reason),
-        },
-        SimCommand::Effects(effects) => {
-            match effects::Effects::checked(effects, shared.limits.len()) {
-                Ok(effects) => {
-                    *shared.effects.lock().unwrap_or_else(|p| p.into_inner()) = effects;
-                    done()
-                }
-                Err(reason) => sim::reply_error(&reason),
-            }
-        }
-        SimCommand::Probe(request) => match probing::start(&request, shared) {
-            Ok(plan) => sim::reply_ok(&plan),
-            Err(reason) => sim::reply_error(&reason),
-        },
-        SimCommand::Pause => {
-            shared.paused.store(true, Ordering::Relaxed);
-            done()
-        }
-        SimCommand::Resume => {
-            shared.paused.store(false, Ordering::Relaxed);
-            done()
-        }
-        SimCommand::Drop => {
-            shared.drop_generation.fetch_add(1, Ordering::Relaxed);
-            done()
-        }
-    }
-}
-
-fn status(shared: &Shared, robot: ShippedRobot) -> sim::SimStatus {
-    let fri = shared
-        .fri
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .as_ref()
-        .map(|link| sim::FriLink {
-            local_address: link.local_address.clone(),
-            quality: link.quality.name().to_owned(),
-            sequence: u64::from(link.sequence),
-            session_state: link.session_state.name().to_owned(),
-            timely_answers: link.timely_answers,
-        });
-    let time_s = shared.now_s();
-    let at_rest = shared
-        .motion
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .at_rest(time_s);
-    let probe = shared
-        .probe
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .as_ref()
-        .map(|schedule| schedule.report(time_s, at_rest));
-    sim::SimStatus {
-        at_rest,
-        clients: shared.clients.load(Ordering::Relaxed),
-        fri,
-        paused: shared.paused.load(Ordering::Relaxed),
-        probe,
-        robot: robot.name().to_owned(),
-        time: time_s,
-    }
 }

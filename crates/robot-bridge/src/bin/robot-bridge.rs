@@ -38,19 +38,31 @@ enum BackendChoice {
     Iiwa,
 }
 
+// Port flags take `allow_negative_numbers` so that `-1` reaches their parser and is refused
+// with its range, rather than read as an unknown flag.
 #[derive(Debug, clap::Args)]
 #[command(next_help_heading = "UR (--backend ur)")]
 struct UrArgs {
-    /// RTDE port of a UR controller.
-    #[arg(long, default_value_t = DEFAULT_RTDE_PORT)]
+    /// RTDE port of a UR controller, 1-65535.
+    #[arg(
+        long,
+        default_value_t = DEFAULT_RTDE_PORT,
+        value_parser = parse_controller_port,
+        allow_negative_numbers = true,
+    )]
     rtde_port: u16,
 }
 
 #[derive(Debug, clap::Args)]
 #[command(next_help_heading = "KUKA iiwa (--backend iiwa)")]
 struct IiwaArgs {
-    /// UDP port to receive FRI monitoring messages on; 0 picks a free one.
-    #[arg(long, default_value_t = DEFAULT_FRI_PORT)]
+    /// UDP port to receive FRI monitoring messages on, 0-65535; 0 picks a free one.
+    #[arg(
+        long,
+        default_value_t = DEFAULT_FRI_PORT,
+        value_parser = parse_listen_port,
+        allow_negative_numbers = true,
+    )]
     fri_port: u16,
 }
 
@@ -67,6 +79,21 @@ fn parse_backend(name: &str) -> Result<BackendChoice, String> {
             known.join(" or ")
         )
     })
+}
+
+/// A port to connect to: 0 names no server.
+fn parse_controller_port(text: &str) -> Result<u16, String> {
+    match parse_listen_port(text)? {
+        0 => Err("port 0 names no controller (expected 1-65535)".to_owned()),
+        port => Ok(port),
+    }
+}
+
+/// A port to listen on, 0 for a free one; `nan`, fractions, signs and values past 65535 are
+/// refused by name.
+fn parse_listen_port(text: &str) -> Result<u16, String> {
+    text.parse()
+        .map_err(|_| format!("'{text}' is not a port (expected a whole number 0-65535)"))
 }
 
 impl Args {

@@ -9,12 +9,19 @@ use signal_hook::iterator::Signals;
 /// FRI monitoring messages to a client), plus a ZeroMQ control socket for tests.
 #[derive(Debug, Parser)]
 #[command(name = "sim-robot", version)]
+// Numeric flags take `allow_negative_numbers` so that `-5` reaches their parser and is refused
+// with its range, rather than read as an unknown flag.
 struct Args {
     /// Robot to simulate: ur10 (CB3, RTDE 125 Hz), ur10e (e-Series, RTDE 500 Hz), iiwa14 (FRI).
     #[arg(long, default_value = "ur10")]
     robot: String,
-    /// RTDE port (UR mode); 0 picks a free one.
-    #[arg(long, default_value_t = 30004)]
+    /// RTDE port (UR mode), 0-65535; 0 picks a free one.
+    #[arg(
+        long,
+        default_value_t = 30004,
+        value_parser = parse_listen_port,
+        allow_negative_numbers = true,
+    )]
     rtde_port: u16,
     /// Address to listen on for RTDE.
     #[arg(long, default_value = "0.0.0.0")]
@@ -23,14 +30,68 @@ struct Args {
     #[arg(long, default_value = "127.0.0.1:30200")]
     fri_target: String,
     /// Milliseconds between FRI monitoring messages, 1-100 (iiwa mode).
-    #[arg(long, default_value_t = 5)]
+    #[arg(
+        long,
+        default_value_t = 5,
+        value_parser = parse_send_period_ms,
+        allow_negative_numbers = true,
+    )]
     fri_send_period_ms: u32,
-    /// The FRI client answers every n-th monitoring message (iiwa mode).
-    #[arg(long, default_value_t = 1)]
+    /// The FRI client answers every n-th monitoring message, 1-100 (iiwa mode).
+    #[arg(
+        long,
+        default_value_t = 1,
+        value_parser = parse_receive_multiplier,
+        allow_negative_numbers = true,
+    )]
     fri_receive_multiplier: u32,
     /// Control socket endpoint.
     #[arg(long, default_value = "tcp://*:5000")]
     control: String,
+}
+
+/// The send periods the Sunrise controller allows. Checked here, for every robot, so that a bad
+/// value is refused whatever `--robot` says (the library checks it again in iiwa mode).
+const SEND_PERIOD_RANGE_MS: std::ops::RangeInclusive<u32> = 1..=100;
+/// Beyond one answer in a hundred messages the link would not count as alive.
+const RECEIVE_MULTIPLIER_RANGE: std::ops::RangeInclusive<u32> = 1..=100;
+
+/// Whole milliseconds within [`SEND_PERIOD_RANGE_MS`], with the reason the library gives.
+fn parse_send_period_ms(text: &str) -> Result<u32, String> {
+    let period_ms = parse_whole_number(text)?;
+    if !SEND_PERIOD_RANGE_MS.contains(&period_ms) {
+        return Err(format!(
+            "send period {period_ms} ms is outside the controller's {}-{} ms",
+            SEND_PERIOD_RANGE_MS.start(),
+            SEND_PERIOD_RANGE_MS.end()
+        ));
+    }
+    Ok(period_ms)
+}
+
+fn parse_receive_multiplier(text: &str) -> Result<u32, String> {
+    let multiplier = parse_whole_number(text)?;
+    if !RECEIVE_MULTIPLIER_RANGE.contains(&multiplier) {
+        return Err(format!(
+            "receive multiplier {multiplier} is outside {}-{}",
+            RECEIVE_MULTIPLIER_RANGE.start(),
+            RECEIVE_MULTIPLIER_RANGE.end()
+        ));
+    }
+    Ok(multiplier)
+}
+
+/// A port to listen on, 0 for a free one; `nan`, fractions, signs and values past 65535 are
+/// refused by name.
+fn parse_listen_port(text: &str) -> Result<u16, String> {
+    text.parse()
+        .map_err(|_| format!("'{text}' is not a port (expected a whole number 0-65535)"))
+}
+
+/// A non-negative whole number; `nan`, `inf`, fractions and signs are refused by name.
+fn parse_whole_number(text: &str) -> Result<u32, String> {
+    text.parse()
+        .map_err(|_| format!("'{text}' is not a whole number"))
 }
 
 fn main() -> ExitCode {
