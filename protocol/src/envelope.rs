@@ -77,7 +77,8 @@ pub(crate) fn check_envelope_shape(value: &serde_json::Value) -> Result<(), Prot
     Ok(())
 }
 
-fn kind_of(value: &serde_json::Value) -> &'static str {
+/// What a JSON value is, as error messages name it ("an array").
+pub fn kind_of(value: &serde_json::Value) -> &'static str {
     match value {
         serde_json::Value::Null => "null",
         serde_json::Value::Bool(_) => "a boolean",

@@ -189,3 +189,32 @@ fn the_vendored_libzmq_has_no_curve_as_the_readme_says() {
     // pins the fact they rest on.
     assert_ne!(zmq::has("curve"), Some(true));
 }
+
+#[test]
+fn raw_tcp_garbage_and_multipart_requests_do_not_stop_the_service() {
+    use std::io::Write;
+    let fixture = Fixture::start("garbage");
+    let address = fixture
+        .service
+        .rep_endpoint
+        .trim_start_matches("tcp://")
+        .to_owned();
+    let mut garbage = std::net::TcpStream::connect(&address).unwrap();
+    // A ZMTP-looking start, then noise: what made a plain REP socket stop answering everyone.
+    garbage
+        .write_all(&[
+            0xFF, 0, 0, 0, 0, 0, 0, 0, 1, 0x7F, 0x13, 0x37, 0x00, 0xFF, 0x42,
+        ])
+        .unwrap();
+    assert_eq!(fixture.call(json!({"command": "status"}))["ok"], true);
+    drop(garbage);
+    fixture
+        .socket
+        .send_multipart([br#"{"header":{}}"#.as_slice(), b"junk"], 0)
+        .unwrap();
+    let reply: Value = serde_json::from_slice(&fixture.socket.recv_bytes(0).unwrap()).unwrap();
+    let why = reply["body"]["reason"].as_str().unwrap();
+    assert!(why.contains("multipart request of 2 frames"), "{why}");
+    assert_eq!(fixture.call(json!({"command": "status"}))["ok"], true);
+    fixture.finish();
+}

@@ -5,6 +5,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use protocol::{Command, RobotSide, StatusBody};
+use reply_socket::{ReplySocket, Wait};
 
 use crate::controller::{ControllerState, Shared};
 
@@ -20,23 +21,24 @@ pub(crate) struct Identity {
 }
 
 pub(crate) fn instruction_loop(
-    socket: zmq::Socket,
+    socket: ReplySocket,
     shared: Arc<Shared>,
     stop: Arc<AtomicBool>,
     identity: Identity,
 ) {
     while !stop.load(Ordering::Relaxed) {
-        let request = match socket.recv_bytes(0) {
-            Ok(request) => request,
-            Err(zmq::Error::EAGAIN) => continue,
-            Err(_) => return,
+        let request = match socket.receive() {
+            Wait::Request(request) => request,
+            Wait::Nothing => continue,
+            Wait::Closed => return,
         };
-        // A REQ client may send a multi-part message: drain it so the reply goes out.
-        while socket.get_rcvmore().unwrap_or(false) {
-            let _ = socket.recv_bytes(0);
-        }
-        let reply = answer(&request, &shared, identity);
-        let _ = socket.send(reply.as_bytes(), 0);
+        let reply = match request.single_frame(MAX_REQUEST_BYTES) {
+            Ok(frame) => answer(frame, &shared, identity),
+            Err(reason) => protocol::to_json(&protocol::ack_error(identity.robot_side, reason))
+                .unwrap_or_default(),
+        };
+        // A reply to a client that has gone is dropped; nothing is left owing.
+        let _ = socket.reply(&request, reply.as_bytes());
     }
 }
 

@@ -12,7 +12,8 @@ use protocol::{HwStateBody, RobotSide};
 
 use crate::backend::{BackendConfig, OpenError, Sample};
 use crate::controller::{ControllerRecord, Shared, backend_loop};
-use crate::instructions::{Identity, MAX_REQUEST_BYTES, instruction_loop};
+use crate::instructions::{Identity, instruction_loop};
+use reply_socket::ReplySocket;
 
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -74,10 +75,6 @@ fn bind(
     socket.set_linger(0).map_err(error)?;
     socket.set_rcvtimeo(100).map_err(error)?;
     socket.set_sndtimeo(1000).map_err(error)?;
-    // 16 MiB, far above the limit, so an oversized request still arrives and gets a reason.
-    socket
-        .set_maxmsgsize(256 * MAX_REQUEST_BYTES as i64)
-        .map_err(error)?;
     socket.bind(endpoint).map_err(error)?;
     let bound = socket
         .get_last_endpoint()
@@ -96,7 +93,12 @@ pub fn start(config: &Config) -> Result<Handle, BridgeError> {
         robot_side: settings.robot_side(),
     };
     let context = zmq::Context::new();
-    let (rep, rep_endpoint) = bind(&context, zmq::REP, &config.rep)?;
+    // A ROUTER doing REP's part (the reply-socket crate says why); REQ clients see a REP.
+    let (rep, rep_endpoint) =
+        ReplySocket::bind(&context, &config.rep, 100).map_err(|source| BridgeError::Socket {
+            endpoint: config.rep.clone(),
+            source,
+        })?;
     let (publisher, pub_endpoint) = bind(&context, zmq::PUB, &config.publish)?;
     let shared = Arc::new(Shared {
         mirroring: AtomicBool::new(false),

@@ -1,17 +1,14 @@
 //! The control socket: one request, one reply, and no request, however malformed, ends the
-//! loop. A fault test found two ways a REP socket stopped serving: a two-frame request left it
-//! owing a reply it could not send (the loop then exited and the port closed), and raw TCP
-//! bytes, which libzmq reads as an unversioned (ZMTP 1.0) peer's messages, left libzmq's REP
-//! state machine stuck so that no later client was answered. The socket is therefore a ROUTER
-//! that does REP's part itself: it reads every frame of every message, answers a REQ client's
-//! request through its envelope (the frames up to the empty delimiter), and drops what no REQ
-//! client sends. REQ clients see no difference.
+//! loop. The socket is a [`ReplySocket`] (the `reply-socket` crate says why a plain REP is
+//! not enough); requests are single JSON objects whose object fields are objects.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 use align_core::robots::ShippedRobot;
+use protocol::envelope::kind_of;
 use protocol::sim::{self, SimCommand};
+use reply_socket::{ReplySocket, Wait};
 
 use crate::motion::Trajectory;
 use crate::{Shared, effects, probing};
@@ -20,115 +17,22 @@ use crate::{Shared, effects, probing};
 /// is a few KiB).
 pub const MAX_REQUEST_BYTES: usize = 64 * 1024;
 
-/// The most envelope frames (routing id and any proxies' hops) kept to address a reply; a
-/// message with more before its delimiter is not from a REQ client and is dropped.
-const MAX_ENVELOPE_FRAMES: usize = 16;
-
-/// A request: where the reply goes, its first body frame, and how many body frames and bytes
-/// came in all.
-struct Received {
-    /// The routing id, any hops, and the empty delimiter: sent back before the reply.
-    envelope: Vec<Vec<u8>>,
-    first_frame: Vec<u8>,
-    frame_count: usize,
-    total_bytes: usize,
-}
-
-/// What one wait on the socket gave.
-enum Wait {
-    Request(Received),
-    /// Nothing within the receive timeout, an interruption, or a message that cannot be
-    /// answered: look at the shutdown flag again.
-    Nothing,
-    /// The context is gone: nothing can be received again.
-    Closed,
-}
-
-pub(crate) fn control_loop(socket: zmq::Socket, shared: Arc<Shared>, robot: ShippedRobot) {
+pub(crate) fn control_loop(socket: ReplySocket, shared: Arc<Shared>, robot: ShippedRobot) {
     while !shared.shutdown.load(Ordering::Relaxed) {
-        let received = match receive(&socket) {
-            Wait::Request(received) => received,
+        let request = match socket.receive() {
+            Wait::Request(request) => request,
             Wait::Nothing => continue,
             Wait::Closed => return,
         };
-        let reply = answer(&received, &shared, robot);
-        // A ROUTER drops a reply to a peer that has gone; nothing is left owing.
-        let _ = send_reply(&socket, &received.envelope, &reply);
-    }
-}
-
-/// Waits for one message and reads all its frames. Frames beyond the first body frame are
-/// counted and dropped, never kept.
-fn receive(socket: &zmq::Socket) -> Wait {
-    let routing_id = match socket.recv_bytes(0) {
-        Ok(frame) => frame,
-        Err(zmq::Error::ETERM | zmq::Error::ENOTSOCK) => return Wait::Closed,
-        // EAGAIN (the receive timeout), EINTR and anything else are not the socket's end.
-        Err(_) => return Wait::Nothing,
-    };
-    let mut envelope = vec![routing_id];
-    let mut delimited = false;
-    let mut first_frame = None;
-    let (mut frame_count, mut total_bytes) = (0_usize, 0_usize);
-    // libzmq delivers a message whole, so its remaining frames are already here.
-    while socket.get_rcvmore().unwrap_or(false) {
-        let Ok(frame) = socket.recv_bytes(0) else {
-            break;
+        let reply = match request.single_frame(MAX_REQUEST_BYTES) {
+            Ok(frame) => match parse_request(frame) {
+                Ok(command) => execute(command, &shared, robot),
+                Err(reason) => sim::reply_error(&reason),
+            },
+            Err(reason) => sim::reply_error(&reason),
         };
-        if !delimited {
-            delimited = frame.is_empty();
-            if envelope.len() < MAX_ENVELOPE_FRAMES {
-                envelope.push(frame);
-            }
-            continue;
-        }
-        frame_count += 1;
-        total_bytes = total_bytes.saturating_add(frame.len());
-        if first_frame.is_none() {
-            first_frame = Some(frame);
-        }
-    }
-    let envelope_complete = envelope.last().is_some_and(Vec::is_empty);
-    if !delimited || !envelope_complete {
-        // Not a REQ client's request (libzmq's REP drops these too): there is no one to
-        // answer.
-        return Wait::Nothing;
-    }
-    Wait::Request(Received {
-        envelope,
-        first_frame: first_frame.unwrap_or_default(),
-        frame_count,
-        total_bytes,
-    })
-}
-
-fn send_reply(socket: &zmq::Socket, envelope: &[Vec<u8>], reply: &str) -> Result<(), zmq::Error> {
-    let frames = envelope
-        .iter()
-        .map(Vec::as_slice)
-        .chain(std::iter::once(reply.as_bytes()));
-    socket.send_multipart(frames, 0)
-}
-
-fn answer(received: &Received, shared: &Shared, robot: ShippedRobot) -> String {
-    if received.frame_count == 0 {
-        return sim::reply_error("an empty request: a request is one frame holding a JSON object");
-    }
-    if received.frame_count > 1 {
-        return sim::reply_error(&format!(
-            "a multipart request of {} frames: a request is a single frame holding one JSON object",
-            received.frame_count
-        ));
-    }
-    if received.total_bytes > MAX_REQUEST_BYTES {
-        return sim::reply_error(&format!(
-            "request of {} bytes exceeds the {MAX_REQUEST_BYTES}-byte limit",
-            received.total_bytes
-        ));
-    }
-    match parse_request(&received.first_frame) {
-        Ok(command) => execute(command, shared, robot),
-        Err(reason) => sim::reply_error(&reason),
+        // A reply to a client that has gone is dropped; nothing is left owing.
+        let _ = socket.reply(&request, reply.as_bytes());
     }
 }
 
@@ -176,17 +80,6 @@ fn parse_request(bytes: &[u8]) -> Result<SimCommand, String> {
         }
     }
     sim::parse_command(bytes)
-}
-
-fn kind_of(value: &serde_json::Value) -> &'static str {
-    match value {
-        serde_json::Value::Null => "null",
-        serde_json::Value::Bool(_) => "a boolean",
-        serde_json::Value::Number(_) => "a number",
-        serde_json::Value::String(_) => "a string",
-        serde_json::Value::Array(_) => "an array",
-        serde_json::Value::Object(_) => "an object",
-    }
 }
 
 /// Carries out one well-formed command.

@@ -47,6 +47,7 @@ pub use control::MAX_REQUEST_BYTES;
 pub use motion::Motion;
 use motion::Trajectory;
 use nalgebra::{DVector, Isometry3, Vector3};
+use reply_socket::ReplySocket;
 
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -97,9 +98,6 @@ pub enum SimError {
     #[error("robot model: {0}")]
     Model(String),
 }
-
-/// The largest frame the control socket accepts at all (see [`MAX_REQUEST_BYTES`]).
-const CONTROL_MAX_FRAME_BYTES: i64 = 1024 * 1024;
 
 /// One controller sample.
 pub(crate) struct Sample {
@@ -342,28 +340,12 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         }
     };
     let context = zmq::Context::new();
-    let control_error = |source| SimError::Control {
-        endpoint: config.control.clone(),
-        source,
-    };
-    // A ROUTER doing REP's part (module `control` says why); REQ clients see a REP.
-    let control = context.socket(zmq::ROUTER).map_err(control_error)?;
-    control.set_linger(0).map_err(control_error)?;
-    control.set_rcvtimeo(100).map_err(control_error)?;
-    // A reply to a client that stopped reading must not hold up every other client; a ROUTER
-    // drops such a reply rather than block, and the timeout bounds any other wait.
-    control.set_sndtimeo(1000).map_err(control_error)?;
-    // Frames past this size drop their peer unread (libzmq): a bound on what one client can
-    // make the simulator allocate. Between MAX_REQUEST_BYTES and this, requests are refused
-    // with a reason.
-    control
-        .set_maxmsgsize(CONTROL_MAX_FRAME_BYTES)
-        .map_err(control_error)?;
-    control.bind(&config.control).map_err(control_error)?;
-    let control_endpoint = control
-        .get_last_endpoint()
-        .map_err(control_error)?
-        .unwrap_or_else(|_| config.control.clone());
+    // A ROUTER doing REP's part (the reply-socket crate says why); REQ clients see a REP.
+    let (control, control_endpoint) =
+        ReplySocket::bind(&context, &config.control, 100).map_err(|source| SimError::Control {
+            endpoint: config.control.clone(),
+            source,
+        })?;
     let mut threads = Vec::new();
     let (mut rtde_address, mut fri_address, mut fri_target) = (None, None, None);
     match server {

@@ -15,6 +15,7 @@ use protocol::{
     MirroringReply, ProtocolError, RobotSide, SavedReply, ServiceCommand, ServiceReply,
     StatusReply,
 };
+use reply_socket::{ReplySocket, Wait};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -101,27 +102,30 @@ pub(crate) fn guarded(request: &[u8], handle: impl FnOnce(&[u8]) -> ServiceReply
 }
 
 impl Service {
-    pub(crate) fn serve(&mut self, rep: &zmq::Socket, stop: &AtomicBool) {
+    pub(crate) fn serve(&mut self, rep: &ReplySocket, stop: &AtomicBool) {
         while !stop.load(Ordering::Relaxed) {
-            let request = match rep.recv_bytes(0) {
-                Ok(request) => request,
-                Err(zmq::Error::EAGAIN) => continue,
-                Err(_) => return,
+            let request = match rep.receive() {
+                Wait::Request(request) => request,
+                Wait::Nothing => continue,
+                Wait::Closed => return,
             };
-            while rep.get_rcvmore().unwrap_or(false) {
-                let _ = rep.recv_bytes(0);
-            }
             let started = std::time::Instant::now();
-            let reply = guarded(&request, |bytes| self.handle(bytes));
+            let reply = match request.single_frame(protocol::MAX_SERVICE_REQUEST_BYTES) {
+                Ok(frame) => guarded(frame, |bytes| self.handle(bytes)),
+                Err(reason) => {
+                    tracing::warn!(%reason, "malformed request refused");
+                    protocol::service_reply_error(reason)
+                }
+            };
             tracing::debug!(
                 ok = reply.body.ok,
-                bytes = request.len(),
                 elapsed_ms = started.elapsed().as_secs_f64() * 1e3,
                 reason = reply.body.reason.as_deref().unwrap_or(""),
                 "request answered"
             );
             let text = protocol::to_json(&reply).unwrap_or_default();
-            let _ = rep.send(text.as_bytes(), 0);
+            // A reply to a client that has gone is dropped; nothing is left owing.
+            let _ = rep.reply(&request, text.as_bytes());
         }
     }
 

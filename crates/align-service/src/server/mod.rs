@@ -37,6 +37,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::{self, JoinHandle};
 
+use reply_socket::ReplySocket;
+
 use crate::BadInput;
 use crate::session::{LoadedSession, parse_session_file};
 
@@ -208,18 +210,16 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         }
     };
     let context = zmq::Context::new();
-    let rep = socket(&context, zmq::REP, 100, &config.rep)?;
+    // A ROUTER doing REP's part (the reply-socket crate says why); REQ clients see a REP.
+    let (rep, rep_endpoint) =
+        ReplySocket::bind(&context, &config.rep, 100).map_err(|source| ServiceError::Socket {
+            endpoint: config.rep.clone(),
+            source,
+        })?;
     let socket_error = |endpoint: &str| {
         let endpoint = endpoint.to_owned();
         move |source| ServiceError::Socket { endpoint, source }
     };
-    rep.set_maxmsgsize(16 * 1024 * 1024)
-        .map_err(socket_error(&config.rep))?;
-    rep.bind(&config.rep).map_err(socket_error(&config.rep))?;
-    let rep_endpoint = rep
-        .get_last_endpoint()
-        .map_err(socket_error(&config.rep))?
-        .unwrap_or_else(|_| config.rep.clone());
     let sub = socket(&context, zmq::SUB, 100, &config.bridge_pub)?;
     sub.set_subscribe(b"")
         .map_err(socket_error(&config.bridge_pub))?;
