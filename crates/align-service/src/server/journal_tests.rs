@@ -123,3 +123,40 @@ fn a_journal_that_does_not_exist_yet_is_none_and_one_unreadable_is_an_error() {
     let error = replay(&path).unwrap_err().to_string();
     assert!(error.contains("inspections.journal"), "{error}");
 }
+
+#[test]
+fn damaged_journals_never_fail_the_start_and_never_invent_an_inspection() {
+    let path = scratch("fuzz");
+    journal_of(&path, 8);
+    let original = std::fs::read(&path).unwrap();
+    let damaged = path.with_file_name("damaged.journal");
+    let mut state = 0x1234_5678_9ABC_DEF1u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for _ in 0..2_000 {
+        let mut bytes = original.clone();
+        for _ in 0..1 + next() % 4 {
+            let at = (next() as usize) % bytes.len();
+            match next() % 4 {
+                0 => bytes[at] ^= 1 << (next() % 8),
+                1 => bytes.insert(at, (next() >> 24) as u8),
+                2 => {
+                    bytes.remove(at);
+                }
+                _ => bytes.truncate(at.max(1)),
+            }
+        }
+        std::fs::write(&damaged, &bytes).unwrap();
+        let replayed = replay(&damaged).unwrap().unwrap();
+        // Every entry that survives its checksum is one that was written.
+        for inspection in &replayed.inspections {
+            let id: u64 = inspection.id.parse().unwrap();
+            assert_eq!(*inspection, self::inspection(id));
+        }
+        let _ = std::fs::remove_file(quarantine_path(&damaged));
+    }
+}
