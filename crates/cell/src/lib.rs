@@ -131,7 +131,13 @@ pub fn spawn(
     args: &[String],
     within: Duration,
 ) -> Result<ChildProcess, CellError> {
-    let mut child = Command::new(program)
+    let mut command = Command::new(program);
+    // The services log at info to stderr; a child of the demo or a test says only what is
+    // wrong unless the user asks for more.
+    if std::env::var_os("RUST_LOG").is_none() {
+        command.env("RUST_LOG", "warn");
+    }
+    let mut child = command
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())

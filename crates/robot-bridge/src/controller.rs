@@ -125,9 +125,18 @@ pub(crate) fn backend_loop(
             continue;
         };
         match event {
-            Event::Connecting => controller.on_connecting(),
-            Event::Connected { .. } => controller.on_connected(),
-            Event::Lost { reason } => controller.on_lost(reason),
+            Event::Connecting => {
+                tracing::debug!("connecting to the controller");
+                controller.on_connecting();
+            }
+            Event::Connected { description } => {
+                tracing::info!(%description, "controller connected");
+                controller.on_connected();
+            }
+            Event::Lost { reason } => {
+                tracing::warn!(%reason, "controller lost");
+                controller.on_lost(reason);
+            }
             Event::Sample(sample) => {
                 controller.on_sample(&sample);
                 drop(controller);

@@ -34,9 +34,13 @@ pub(crate) fn instruction_loop(
         };
         let reply = match request.single_frame(MAX_REQUEST_BYTES) {
             Ok(frame) => answer(frame, &shared, identity),
-            Err(reason) => protocol::to_json(&protocol::ack_error(identity.robot_side, reason))
-                .unwrap_or_default(),
+            Err(reason) => {
+                tracing::warn!(%reason, "malformed instruction refused");
+                protocol::to_json(&protocol::ack_error(identity.robot_side, reason))
+                    .unwrap_or_default()
+            }
         };
+        tracing::debug!(reply = %reply, "instruction answered");
         // A reply to a client that has gone is dropped; nothing is left owing.
         let _ = socket.reply(&request, reply.as_bytes());
     }
@@ -55,7 +59,10 @@ fn answer(request: &[u8], shared: &Shared, identity: Identity) -> String {
     }
     let parsed = match protocol::parse_request(request) {
         Ok(parsed) => parsed,
-        Err(reason) => return error(reason.to_string()),
+        Err(reason) => {
+            tracing::warn!(%reason, "malformed instruction refused");
+            return error(reason.to_string());
+        }
     };
     let controller = shared.controller.lock().unwrap_or_else(|p| p.into_inner());
     match parsed.command {

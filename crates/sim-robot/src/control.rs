@@ -24,12 +24,18 @@ pub(crate) fn control_loop(socket: ReplySocket, shared: Arc<Shared>, robot: Ship
             Wait::Nothing => continue,
             Wait::Closed => return,
         };
-        let reply = match request.single_frame(MAX_REQUEST_BYTES) {
-            Ok(frame) => match parse_request(frame) {
-                Ok(command) => execute(command, &shared, robot),
-                Err(reason) => sim::reply_error(&reason),
-            },
-            Err(reason) => sim::reply_error(&reason),
+        let reply = match request
+            .single_frame(MAX_REQUEST_BYTES)
+            .and_then(parse_request)
+        {
+            Ok(command) => {
+                tracing::debug!(?command, "control request");
+                execute(command, &shared, robot)
+            }
+            Err(reason) => {
+                tracing::warn!(%reason, "control request refused");
+                sim::reply_error(&reason)
+            }
         };
         // A reply to a client that has gone is dropped; nothing is left owing.
         let _ = socket.reply(&request, reply.as_bytes());

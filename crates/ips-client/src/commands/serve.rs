@@ -5,6 +5,7 @@ use clap::Args;
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::iterator::Signals;
 use std::path::PathBuf;
+use tracing_subscriber::EnvFilter;
 
 use crate::CliError;
 
@@ -77,11 +78,9 @@ pub fn run(args: &ServeArgs) -> Result<String, CliError> {
 /// Logs to stderr at the levels `RUST_LOG` names (default `info`; `RUST_LOG=debug` adds one
 /// line per request); stdout carries only the READY line.
 fn init_logs() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    // A second initialisation (never in the binary) is harmless: the first subscriber stays.
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let logs = tracing_subscriber::fmt().with_env_filter(filter);
+    let _ = logs
         .with_writer(std::io::stderr)
         .with_target(false)
         .try_init();

@@ -6,6 +6,7 @@ use robot_bridge::backend::ur::{DEFAULT_RTDE_PORT, UrConfig};
 use robot_bridge::{BackendConfig, Config};
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::iterator::Signals;
+use tracing_subscriber::EnvFilter;
 
 /// Mirrors a cobot controller's joint states onto the thesis's ZeroMQ sockets.
 #[derive(Debug, Parser)]
@@ -132,6 +133,7 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    init_logs();
     let config = args.into_config();
     let mut signals = match Signals::new([SIGINT, SIGTERM]) {
         Ok(signals) => signals,
@@ -161,4 +163,15 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// Logs to stderr at the levels `RUST_LOG` names (default `info`); stdout carries only the
+/// READY line.
+fn init_logs() {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let logs = tracing_subscriber::fmt().with_env_filter(filter);
+    let _ = logs
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
 }

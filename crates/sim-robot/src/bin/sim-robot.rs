@@ -4,6 +4,7 @@ use align_core::robots::ShippedRobot;
 use clap::Parser;
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::iterator::Signals;
+use tracing_subscriber::EnvFilter;
 
 /// A simulated cobot controller speaking the real controller's protocol (UR: RTDE server; iiwa:
 /// FRI monitoring messages to a client), plus a ZeroMQ control socket for tests.
@@ -116,6 +117,7 @@ fn main() -> ExitCode {
         );
         return ExitCode::from(2);
     };
+    init_logs();
     let config = sim_robot::Config {
         robot,
         rtde_listen: format!("{}:{}", args.rtde_host, args.rtde_port),
@@ -156,4 +158,15 @@ fn main() -> ExitCode {
     signals.forever().next();
     handle.stop();
     ExitCode::SUCCESS
+}
+
+/// Logs to stderr at the levels `RUST_LOG` names (default `info`); stdout carries only the
+/// READY line.
+fn init_logs() {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let logs = tracing_subscriber::fmt().with_env_filter(filter);
+    let _ = logs
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
 }
