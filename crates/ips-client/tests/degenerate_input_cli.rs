@@ -134,3 +134,15 @@ fn a_mesh_scale_of_1000_instead_of_0_001_is_refused_with_the_unit_hint() {
     let output = ips(&["align", session.to_str().unwrap()]);
     assert_refused(&output, "its scale is 0.001, not 1000");
 }
+
+#[test]
+fn a_tcp_offset_in_mm_given_as_m_is_refused_with_the_unit_hint() {
+    let folder = scratch("tcp-in-mm");
+    let session = session_with_mesh(&folder, &example("step_block.stl"), 0.001);
+    let mut file: Value =
+        serde_json::from_str(&std::fs::read_to_string(&session).unwrap()).unwrap();
+    file["tool"]["tcp"]["xyz"] = json!([0.0, 0.0, 150.0]);
+    std::fs::write(&session, file.to_string()).unwrap();
+    let output = ips(&["align", session.to_str().unwrap()]);
+    assert_refused(&output, "150.00 m from the flange");
+}

@@ -18,7 +18,9 @@ use protocol::reports::{
 };
 
 use crate::BadInput;
-use crate::jobs::units::{extent_m, refuse_unit_mismatch, tool_warning, unit_hints, with_hints};
+use crate::jobs::units::{
+    extent_m, refuse_impossible_tool, refuse_unit_mismatch, tool_warning, unit_hints, with_hints,
+};
 use crate::session::LoadedSession;
 
 /// The keys every alignment report starts with, from what every alignment returns.
@@ -85,6 +87,7 @@ pub fn align_session(
         .with_faces(&session.faces)
         .map_err(BadInput::new)?;
     let mesh_scale = session.file.part.mesh_scale;
+    refuse_impossible_tool(&session.tool)?;
     let touch_points: Vec<Point3<f64>> = session.touches.iter().map(|t| t.point).collect();
     refuse_unit_mismatch(
         &session.mesh,
