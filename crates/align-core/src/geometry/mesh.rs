@@ -12,6 +12,14 @@ use parry3d_f64::math::Vector as GlamVector;
 use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
+use super::spread::{PrincipalSpread, human_length, implausible_size_warning};
+
+/// A vertex spread (standard deviation) below this fraction of the largest one is no spread at
+/// all: STL stores f32, whose rounding moves exactly collinear or coplanar vertices by about
+/// 1e-7 of the part's size, while a real part's thinnest direction (a 0.5 mm sheet on a 2 m
+/// panel) is above 1e-4.
+const FLAT_SPREAD_RATIO: f64 = 1e-6;
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MeshError {
     #[error("the mesh has no triangles")]
@@ -31,6 +39,17 @@ pub enum MeshError {
     },
     #[error("every triangle of the mesh is degenerate (zero area)")]
     AllDegenerate,
+    #[error(
+        "the mesh has no surface: its triangles have zero area (every vertex lies on one line through ({x:.4}, {y:.4}, {z:.4}) m along ({dx:.3}, {dy:.3}, {dz:.3})), so no alignment can fix the rotation about that line or the translation along it"
+    )]
+    Collinear {
+        x: f64,
+        y: f64,
+        z: f64,
+        dx: f64,
+        dy: f64,
+        dz: f64,
+    },
     #[error("cannot build the mesh: {0}")]
     Build(String),
 }
@@ -57,6 +76,8 @@ pub struct Mesh {
     radius_m: f64,
     /// Axis-aligned bounds in the mesh frame (parry recomputes them on every call).
     bounds: (Point3<f64>, Point3<f64>),
+    /// Which of `notes` warns that the size is implausible for a part (a unit mistake).
+    size_note: Option<usize>,
 }
 
 fn to_glam(p: &Point3<f64>) -> GlamVector {
@@ -135,6 +156,7 @@ impl Mesh {
         if trimesh.num_triangles() == 0 {
             return Err(MeshError::AllDegenerate);
         }
+        check_spread(&trimesh, &mut notes)?;
         let vertices = trimesh.vertices();
         let centroid = vertices
             .iter()
@@ -150,6 +172,11 @@ impl Mesh {
             Point3::from(from_glam(aabb.mins)),
             Point3::from(from_glam(aabb.maxs)),
         );
+        let size_note = implausible_size_warning("the mesh", (bounds.1 - bounds.0).norm(), None)
+            .map(|warning| {
+                notes.push(warning);
+                notes.len() - 1
+            });
         Ok(Self {
             trimesh,
             watertight,
@@ -157,6 +184,7 @@ impl Mesh {
             centroid,
             radius_m,
             bounds,
+            size_note,
         })
     }
 
@@ -194,9 +222,28 @@ impl Mesh {
         self.watertight
     }
 
-    /// Remarks on how the mesh was interpreted (e.g. why distances are unsigned).
+    /// Remarks on how the mesh was interpreted (e.g. why distances are unsigned, that it is flat,
+    /// that its size looks like a unit mistake).
     pub fn notes(&self) -> &[String] {
         &self.notes
+    }
+
+    /// The notes, with the size warning (if any) naming the unit scale the file was read with
+    /// and the scale that would make the part's size plausible.
+    pub fn notes_with_unit_scale(&self, unit_scale: f64) -> Vec<String> {
+        let mut notes = self.notes.clone();
+        if let Some(index) = self.size_note
+            && let Some(warning) =
+                implausible_size_warning("the mesh", self.size_m(), Some(unit_scale))
+        {
+            notes[index] = warning;
+        }
+        notes
+    }
+
+    /// The diagonal of the axis-aligned bounds, m: how large the part is across.
+    pub fn size_m(&self) -> f64 {
+        (self.bounds.1 - self.bounds.0).norm()
     }
 
     pub fn num_triangles(&self) -> usize {
@@ -365,6 +412,48 @@ impl Mesh {
             face_normal,
         }
     }
+}
+
+/// Refuses a mesh whose vertices all lie on a line or in a point (its triangles have no area,
+/// whatever parry kept), and notes a flat one: touches or a scan of a plane fix only the motion
+/// out of it.
+fn check_spread(trimesh: &TriMesh, notes: &mut Vec<String>) -> Result<(), MeshError> {
+    let spread = PrincipalSpread::of(
+        trimesh
+            .vertices()
+            .iter()
+            .map(|v| Point3::from(from_glam(*v))),
+    );
+    let Some(spread) = spread else {
+        return Err(MeshError::Empty);
+    };
+    let [widest_m, middle_m, thinnest_m] = spread.sigma_m;
+    if widest_m == 0.0 {
+        return Err(MeshError::AllDegenerate);
+    }
+    if middle_m <= FLAT_SPREAD_RATIO * widest_m {
+        let (at, along) = (spread.centroid, spread.axes[0]);
+        return Err(MeshError::Collinear {
+            x: at.x,
+            y: at.y,
+            z: at.z,
+            dx: along.x,
+            dy: along.y,
+            dz: along.z,
+        });
+    }
+    if thinnest_m <= FLAT_SPREAD_RATIO * widest_m {
+        let normal = spread.axes[2];
+        let aabb = trimesh.local_aabb();
+        notes.push(format!(
+            "the mesh is flat (every vertex in one plane, normal ({:.3}, {:.3}, {:.3}) in the part frame, {} across): touching or scanning its face fixes only the motion out of the plane; the translation within the plane and the rotation about its normal are free unless its edges are touched",
+            normal.x,
+            normal.y,
+            normal.z,
+            human_length(from_glam(aabb.maxs - aabb.mins).norm())
+        ));
+    }
+    Ok(())
 }
 
 /// Six times the signed volume enclosed by the triangles (positive for outward winding).

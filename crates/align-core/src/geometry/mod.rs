@@ -4,6 +4,8 @@
 mod distance_grid;
 mod mesh;
 pub mod shapes;
+mod spread;
 
 pub use distance_grid::DistanceGrid;
 pub use mesh::{Mesh, MeshError, SignedClosest, SurfacePoint};
+pub use spread::{PLAUSIBLE_PART_SIZE_M, PrincipalSpread, human_length, implausible_size_warning};

@@ -21,7 +21,7 @@ use super::convergence::{StopCriterion, pose_distance};
 use super::psa::spread_rotations;
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, PrincipalSpread};
 use crate::registration::Alignment;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,6 +96,68 @@ pub enum PcaError {
         "only {kept} cloud points lie within delta = {delta_m} m of the part at the start pose (at least 6 needed): is the start pose right and delta large enough?"
     )]
     TooFewPoints { kept: usize, delta_m: f64 },
+    #[error(
+        "the {kept} cloud keypoints near the part lie on a line along ({dx:.3}, {dy:.3}, {dz:.3}) (base frame; spread across it {across_mm:.2} mm, the part's radius {radius_mm:.1} mm): the rotation about that line and the translation along it are unconstrained"
+    )]
+    Collinear {
+        kept: usize,
+        dx: f64,
+        dy: f64,
+        dz: f64,
+        across_mm: f64,
+        radius_mm: f64,
+    },
+    #[error(
+        "the {kept} cloud keypoints near the part lie in one plane with normal ({nx:.3}, {ny:.3}, {nz:.3}) (base frame; spread off it {off_mm:.2} mm, the part's radius {radius_mm:.1} mm): the translation within that plane and the rotation about its normal are unconstrained"
+    )]
+    Planar {
+        kept: usize,
+        nx: f64,
+        ny: f64,
+        nz: f64,
+        off_mm: f64,
+        radius_mm: f64,
+    },
+}
+
+/// A cloud spread (standard deviation of the points near the part) below this fraction of the
+/// part's radius in some direction does not constrain the pose in it. A face seen whole spreads
+/// about 0.3 of its length (a uniform strip of length L has sigma L/sqrt(12)), and even a corner
+/// of a part seen from one side spreads several percent of its radius, while scanner noise off a
+/// plane or a line is a millimetre or less: 1% of a 150 mm radius is 1.5 mm, above the noise and
+/// far below any real view of two faces.
+const MIN_SPREAD_OF_RADIUS: f64 = 0.01;
+
+/// Refuses points near the part that cannot fix its pose: all on a line or in one plane.
+fn check_constrains_pose(matches: &[Match], radius_m: f64) -> Result<(), PcaError> {
+    let Some(spread) = PrincipalSpread::of(matches.iter().map(|m| m.point)) else {
+        return Ok(());
+    };
+    let min_spread_m = MIN_SPREAD_OF_RADIUS * radius_m;
+    let (kept, radius_mm) = (matches.len(), radius_m * 1e3);
+    if spread.sigma_m[1] < min_spread_m {
+        let along = spread.axes[0];
+        return Err(PcaError::Collinear {
+            kept,
+            dx: along.x,
+            dy: along.y,
+            dz: along.z,
+            across_mm: spread.sigma_m[1] * 1e3,
+            radius_mm,
+        });
+    }
+    if spread.sigma_m[2] < min_spread_m {
+        let normal = spread.axes[2];
+        return Err(PcaError::Planar {
+            kept,
+            nx: normal.x,
+            ny: normal.y,
+            nz: normal.z,
+            off_mm: spread.sigma_m[2] * 1e3,
+            radius_mm,
+        });
+    }
+    Ok(())
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -171,6 +233,7 @@ pub fn align_cloud(
             delta_m: delta0_m,
         });
     }
+    check_constrains_pose(&first, mesh.radius_m())?;
     let mut start = *base_from_part_start;
     let mut starts = 1;
     let mut schedule_from = delta0_m;

@@ -18,6 +18,9 @@ use protocol::reports::{
 };
 
 use crate::BadInput;
+use crate::jobs::units::{
+    extent_m, refuse_impossible_tool, refuse_unit_mismatch, tool_warning, unit_hints, with_hints,
+};
 use crate::session::LoadedSession;
 
 /// The keys every alignment report starts with, from what every alignment returns.
@@ -83,6 +86,15 @@ pub fn align_session(
     let target = PsaTarget::new(&session.mesh)
         .with_faces(&session.faces)
         .map_err(BadInput::new)?;
+    let mesh_scale = session.file.part.mesh_scale;
+    refuse_impossible_tool(&session.tool)?;
+    let touch_points: Vec<Point3<f64>> = session.touches.iter().map(|t| t.point).collect();
+    refuse_unit_mismatch(
+        &session.mesh,
+        mesh_scale,
+        extent_m(&touch_points),
+        "the touches span",
+    )?;
     let options = options_for(choices, session.tool.tip_radius_m);
     align_touches(
         &target,
@@ -90,13 +102,20 @@ pub fn align_session(
         &session.base_from_part_nominal,
         &options,
     )
-    .map_err(|error| BadInput(format!("cannot align: {error}")))
+    .map_err(|error| {
+        let hints = unit_hints(&session.mesh, mesh_scale, Some(&session.tool));
+        BadInput(with_hints(format!("cannot align: {error}"), &hints))
+    })
 }
 
 /// The alignment's report with the pose uncertainty (or why there is none): what `ips align
 /// SESSION` prints and the service's `align` replies.
 pub fn report(session: &LoadedSession, result: &PsaResult) -> AlignReport {
-    let mut aligned = output(result, session.mesh.notes().to_vec());
+    let mut notes = session
+        .mesh
+        .notes_with_unit_scale(session.file.part.mesh_scale);
+    notes.extend(tool_warning(&session.tool));
+    let mut aligned = output(result, notes);
     match uncertainty(session, result) {
         Ok(json) => aligned.uncertainty = Some(json),
         Err(why) => aligned.uncertainty_error = Some(why),

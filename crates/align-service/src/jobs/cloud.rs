@@ -16,6 +16,7 @@ use protocol::session::PartSection;
 
 use crate::BadInput;
 use crate::jobs::align::summary;
+use crate::jobs::units::{extent_m, refuse_unit_mismatch, unit_hints, with_hints};
 
 /// The start pose's error bound a service request gets when it names none, m. A hand-placed
 /// part in a modelled cell is within 100 mm of its nominal pose; at that delta our method found
@@ -106,6 +107,8 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
     let mesh = Mesh::new(&soup.vertices, &soup.triangles)
         .map_err(|error| BadInput(format!("'{}': {error}", job.mesh.display())))?;
     let cloud = read_cloud(&job.cloud, job.cloud_scale).map_err(BadInput::new)?;
+    refuse_unit_mismatch(&mesh, job.mesh_scale, extent_m(&cloud), "the cloud spans")?;
+    let hints = unit_hints(&mesh, job.mesh_scale, None);
     let result = align_cloud(
         &mesh,
         &cloud,
@@ -113,7 +116,7 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
         job.delta_m,
         &job.options,
     )
-    .map_err(|error| BadInput(format!("cannot align: {error}")))?;
+    .map_err(|error| BadInput(with_hints(format!("cannot align: {error}"), &hints)))?;
     Ok(CloudReport {
         // Thousands of points: no residual per point.
         alignment: summary(&result.alignment, Vec::new()),
@@ -122,6 +125,6 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
         kept_points: result.kept,
         final_delta: result.final_delta_m,
         starts: result.alignment.starts,
-        notes: mesh.notes().to_vec(),
+        notes: mesh.notes_with_unit_scale(job.mesh_scale),
     })
 }

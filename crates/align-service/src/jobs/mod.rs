@@ -5,3 +5,4 @@
 pub mod align;
 pub mod cloud;
 pub mod diagnose;
+pub mod units;
