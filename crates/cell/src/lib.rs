@@ -31,6 +31,8 @@ pub enum CellError {
     NoEndpoint { name: String, key: String },
     #[error("cargo build of the workspace binaries failed ({status})")]
     Build { status: ExitStatus },
+    #[error("{name} was still running after {within:?}")]
+    StillRunning { name: String, within: Duration },
     #[error("{name} exited early ({status})")]
     Exited { name: String, status: ExitStatus },
 }
@@ -216,6 +218,51 @@ pub fn build_workspace_binaries(workspace_root: &Path) -> Result<(), CellError> 
         Ok(())
     } else {
         Err(CellError::Build { status })
+    }
+}
+
+/// Runs `program` with `args` to its exit and returns its exit code and stderr; a program still
+/// running after `within` (it accepted its arguments and went on to serve) is killed and
+/// reported. For tests of refused arguments.
+pub fn run_to_exit(
+    program: &Path,
+    args: &[&str],
+    within: Duration,
+) -> Result<(Option<i32>, String), CellError> {
+    let name = program.display().to_string();
+    let mut child = Command::new(program)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|source| CellError::Spawn {
+            name: name.clone(),
+            source,
+        })?;
+    let stderr_pipe = child.stderr.take();
+    let (sender, receiver) = mpsc::channel();
+    // The pipe reaches its end when the process exits.
+    std::thread::spawn(move || {
+        let mut stderr = String::new();
+        if let Some(mut pipe) = stderr_pipe {
+            let _ = std::io::Read::read_to_string(&mut pipe, &mut stderr);
+        }
+        let _ = sender.send(stderr);
+    });
+    match receiver.recv_timeout(within) {
+        Ok(stderr) => {
+            let status = child.wait().map_err(|source| CellError::Spawn {
+                name: name.clone(),
+                source,
+            })?;
+            Ok((status.code(), stderr))
+        }
+        Err(_) => {
+            let _ = child.kill();
+            let _ = child.wait();
+            Err(CellError::StillRunning { name, within })
+        }
     }
 }
 

@@ -3,41 +3,14 @@
 
 #![allow(clippy::unwrap_used, clippy::panic)] // Tests: a panic is the failure report.
 
-use std::io::Read;
-use std::process::{Command, Stdio};
-use std::sync::mpsc;
-use std::thread;
 use std::time::Duration;
 
 /// How long a refused invocation may take; one still running then was not refused.
 const EXIT_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// Runs the binary with `args` and returns its exit code and stderr, killing it if it is still
-/// running after [`EXIT_TIMEOUT`] (it then accepted the flags and went on to serve).
 fn run(binary: &str, args: &[&str]) -> (Option<i32>, String) {
-    let mut child = Command::new(binary)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stderr_pipe = child.stderr.take().unwrap();
-    let (sender, receiver) = mpsc::channel();
-    // The pipe reaches its end when the process exits.
-    thread::spawn(move || {
-        let mut stderr = String::new();
-        let _ = stderr_pipe.read_to_string(&mut stderr);
-        let _ = sender.send(stderr);
-    });
-    match receiver.recv_timeout(EXIT_TIMEOUT) {
-        Ok(stderr) => (child.wait().unwrap().code(), stderr),
-        Err(_) => {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("{binary} {args:?} still running after {EXIT_TIMEOUT:?}: flags accepted");
-        }
-    }
+    cell::run_to_exit(std::path::Path::new(binary), args, EXIT_TIMEOUT)
+        .unwrap_or_else(|error| panic!("{args:?}: {error}: flags accepted"))
 }
 
 /// Each invocation exits 2 with one line on stderr that contains its reason.
