@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
+use crate::envelope::kind_of;
 use crate::pose::Pose;
 
 /// A control request, tagged by its `command`.
@@ -265,10 +266,55 @@ pub fn parse_reply<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, SimReplyError
     serde_json::from_value(value).map_err(|error| SimReplyError::Shape(error.to_string()))
 }
 
+/// Fields that hold objects wherever they appear at the top of a request.
+const OBJECT_FIELDS: [&str; 5] = [
+    "motion",
+    "payload",
+    "cyclic_encoder",
+    "base_from_part",
+    "tcp",
+];
+
+/// Checks that objects are objects: serde's derived structs also read arrays
+/// (`["hold",[0,0,0,0,0,0]]` would read as a hold motion), which no client writes.
+fn check_objects(value: &serde_json::Value) -> Result<(), String> {
+    let Some(object) = value.as_object() else {
+        return Err(format!(
+            "the request must be a JSON object, got {}",
+            kind_of(value)
+        ));
+    };
+    for field in OBJECT_FIELDS {
+        match object.get(field) {
+            Some(inner) if !inner.is_object() => {
+                return Err(format!(
+                    "'{field}' must be an object, got {}",
+                    kind_of(inner)
+                ));
+            }
+            _ => {}
+        }
+    }
+    let waypoints = object
+        .get("motion")
+        .and_then(|motion| motion.get("waypoints"))
+        .and_then(serde_json::Value::as_array);
+    for (index, waypoint) in waypoints.into_iter().flatten().enumerate() {
+        if !waypoint.is_object() {
+            return Err(format!(
+                "'motion.waypoints[{index}]' must be an object, got {}",
+                kind_of(waypoint)
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Reads a control request, naming what is wrong with it.
 pub fn parse_command(bytes: &[u8]) -> Result<SimCommand, String> {
     let value: serde_json::Value =
         serde_json::from_slice(bytes).map_err(|_| "the request is not JSON".to_owned())?;
+    check_objects(&value)?;
     let Some(name) = value.get("command") else {
         return Err("the request has no 'command'".to_owned());
     };

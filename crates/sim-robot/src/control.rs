@@ -6,7 +6,6 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 use align_core::robots::ShippedRobot;
-use protocol::envelope::kind_of;
 use protocol::sim::{self, SimCommand};
 use reply_socket::{ReplySocket, Wait};
 
@@ -26,7 +25,7 @@ pub(crate) fn control_loop(socket: ReplySocket, shared: Arc<Shared>, robot: Ship
         };
         let reply = match request
             .single_frame(MAX_REQUEST_BYTES)
-            .and_then(parse_request)
+            .and_then(sim::parse_command)
         {
             Ok(command) => {
                 tracing::debug!(?command, "control request");
@@ -40,52 +39,6 @@ pub(crate) fn control_loop(socket: ReplySocket, shared: Arc<Shared>, robot: Ship
         // A reply to a client that has gone is dropped; nothing is left owing.
         let _ = socket.reply(&request, reply.as_bytes());
     }
-}
-
-/// Fields that hold objects wherever they appear at the top of a request.
-const OBJECT_FIELDS: [&str; 5] = [
-    "motion",
-    "payload",
-    "cyclic_encoder",
-    "base_from_part",
-    "tcp",
-];
-
-/// Parses a request after checking that objects are objects: serde's derived structs also
-/// read arrays (`["hold",[0,0,0,0,0,0]]` would read as a hold motion), which no client writes.
-fn parse_request(bytes: &[u8]) -> Result<SimCommand, String> {
-    let value: serde_json::Value =
-        serde_json::from_slice(bytes).map_err(|_| "the request is not JSON".to_owned())?;
-    let Some(object) = value.as_object() else {
-        return Err(format!(
-            "the request must be a JSON object, got {}",
-            kind_of(&value)
-        ));
-    };
-    for field in OBJECT_FIELDS {
-        match object.get(field) {
-            Some(inner) if !inner.is_object() => {
-                return Err(format!(
-                    "'{field}' must be an object, got {}",
-                    kind_of(inner)
-                ));
-            }
-            _ => {}
-        }
-    }
-    let waypoints = object
-        .get("motion")
-        .and_then(|motion| motion.get("waypoints"))
-        .and_then(serde_json::Value::as_array);
-    for (index, waypoint) in waypoints.into_iter().flatten().enumerate() {
-        if !waypoint.is_object() {
-            return Err(format!(
-                "'motion.waypoints[{index}]' must be an object, got {}",
-                kind_of(waypoint)
-            ));
-        }
-    }
-    sim::parse_command(bytes)
 }
 
 /// Carries out one well-formed command.
