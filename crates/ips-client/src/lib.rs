@@ -69,6 +69,14 @@ pub fn display_round(value: f64, decimals: i32) -> f64 {
     (value * scale).round() / scale + 0.0
 }
 
+/// `NAME: xyz [m] X Y Z, rpy [rad] R P Y` with a newline, six decimals, no negative zeros: how
+/// every alignment's text starts.
+pub fn pose_line(name: &str, pose: &protocol::Pose) -> String {
+    let [x, y, z] = pose.xyz.map(|v| display_round(v, 6));
+    let [roll, pitch, yaw] = pose.rpy.map(|v| display_round(v, 6));
+    format!("{name}: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n")
+}
+
 /// One JSON document on one line, as every `--json` prints.
 pub fn json_line(value: &impl serde::Serialize) -> Result<String, CliError> {
     serde_json::to_string(value)

@@ -61,19 +61,7 @@ pub fn run(args: &AlignArgs) -> Result<String, CliError> {
 
 /// The report for people: the pose, how the search went, its uncertainty and the residuals.
 pub fn to_text(report: &AlignReport) -> String {
-    let [x, y, z] = report
-        .alignment
-        .pose
-        .xyz
-        .map(|v| crate::display_round(v, 6));
-    let [roll, pitch, yaw] = report
-        .alignment
-        .pose
-        .rpy
-        .map(|v| crate::display_round(v, 6));
-    let mut text = format!(
-        "base_from_part: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
-    );
+    let mut text = crate::pose_line("base_from_part", &report.alignment.pose);
     text += &format!(
         "{} after {} iterations ({} starts) in {:.1} ms; residual rms {:.4} mm, max {:.4} mm\n",
         if report.alignment.converged {

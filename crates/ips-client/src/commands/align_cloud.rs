@@ -130,19 +130,7 @@ fn parse_pose(text: &str) -> Result<Pose, BadInput> {
 }
 
 pub fn to_text(report: &CloudReport) -> String {
-    let [x, y, z] = report
-        .alignment
-        .pose
-        .xyz
-        .map(|v| crate::display_round(v, 6));
-    let [roll, pitch, yaw] = report
-        .alignment
-        .pose
-        .rpy
-        .map(|v| crate::display_round(v, 6));
-    let mut text = format!(
-        "base_from_part: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
-    );
+    let mut text = crate::pose_line("base_from_part", &report.alignment.pose);
     text += &format!(
         "{} after {} iterations ({} runs) in {:.1} ms\n",
         if report.alignment.converged {
