@@ -212,21 +212,21 @@ pub fn diagnose(
         mass_kg: tool.mass_kg,
         com_in_tip: tool.com_in_flange,
     };
-    let problem = Problem {
+    let gravity_torques_nm = touches
+        .iter()
+        .map(|touch| match (chain, &touch.base_from_flange) {
+            (Some(chain), None) => chain.gravity_torques_nm(&touch.q, Some(&payload)),
+            _ => Vec::new(),
+        })
+        .collect();
+    let problem = Problem::new(
         chain,
         tool,
         mesh,
         touches,
-        start: *base_from_part,
-        centre: mesh.centroid(),
-        gravity_torques_nm: touches
-            .iter()
-            .map(|touch| match (chain, &touch.base_from_flange) {
-                (Some(chain), None) => chain.gravity_torques_nm(&touch.q, Some(&payload)),
-                _ => Vec::new(),
-            })
-            .collect(),
-    };
+        *base_from_part,
+        gravity_torques_nm,
+    );
     let sigma = noise_sigma_m;
     let pose_theta = problem.fit(&[], None);
     let mut before = problem

@@ -2,6 +2,8 @@
 //! surface as a function of the part pose and the effect parameters, its Jacobian, and a
 //! Levenberg-Marquardt fit.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::effects::Effect;
@@ -28,6 +30,15 @@ pub(super) struct Extras {
     pub scale_minus_one: f64,
 }
 
+impl Extras {
+    /// Whether these effects change a joint angle (then the kinematics must run again).
+    fn moves_joints(&self) -> bool {
+        self.latency_s != 0.0
+            || self.joint_offsets_rad.iter().any(|v| *v != 0.0)
+            || self.compliance_rad_per_nm.iter().any(|v| *v != 0.0)
+    }
+}
+
 pub(super) struct Problem<'a> {
     pub chain: Option<&'a Chain>,
     pub tool: &'a Tool,
@@ -38,6 +49,47 @@ pub(super) struct Problem<'a> {
     /// Gravity torque on each joint at each touch (N m), for `joint_compliance`; empty for a
     /// touch given as a flange pose.
     pub gravity_torques_nm: Vec<Vec<f64>>,
+    /// Each touch's flange pose with no effect applied: fits that change no joint (the pose
+    /// alone, TCP, radius, scale) reuse it instead of running the kinematics per evaluation.
+    nominal_base_from_flange: Vec<Isometry3<f64>>,
+    /// Each touch's last closest triangle ([`NO_HINT`] before the first): successive
+    /// evaluations move a touch little, so it bounds the next search. Atomic so that fits may
+    /// share the problem across threads; any triangle is a valid hint.
+    hints: Vec<AtomicU32>,
+}
+
+const NO_HINT: u32 = u32::MAX;
+
+impl<'a> Problem<'a> {
+    pub fn new(
+        chain: Option<&'a Chain>,
+        tool: &'a Tool,
+        mesh: &'a Mesh,
+        touches: &'a [TouchSample],
+        start: Isometry3<f64>,
+        gravity_torques_nm: Vec<Vec<f64>>,
+    ) -> Self {
+        let nominal_base_from_flange = touches
+            .iter()
+            .map(|touch| match (&touch.base_from_flange, chain) {
+                (Some(pose), _) => *pose,
+                (None, Some(chain)) => chain.forward_unchecked(&touch.q),
+                // `diagnose` refuses joint touches without a chain.
+                (None, None) => Isometry3::identity(),
+            })
+            .collect();
+        Self {
+            chain,
+            tool,
+            mesh,
+            touches,
+            start,
+            centre: mesh.centroid(),
+            gravity_torques_nm,
+            nominal_base_from_flange,
+            hints: touches.iter().map(|_| AtomicU32::new(NO_HINT)).collect(),
+        }
+    }
 }
 
 impl Problem<'_> {
@@ -82,7 +134,7 @@ impl Problem<'_> {
         let touch = &self.touches[index];
         let base_from_flange = match (&touch.base_from_flange, self.chain) {
             (Some(pose), _) => *pose,
-            (None, Some(chain)) => {
+            (None, Some(chain)) if extras.moves_joints() => {
                 let mut q = touch.q.clone();
                 for (j, v) in q.iter_mut().enumerate() {
                     *v += extras.joint_offsets_rad[j];
@@ -97,20 +149,42 @@ impl Problem<'_> {
                 }
                 chain.forward_unchecked(&q)
             }
-            // `diagnose` refuses joint touches without a chain.
-            (None, None) => Isometry3::identity(),
+            (None, _) => self.nominal_base_from_flange[index],
         };
         let mut flange_from_tcp = self.tool.flange_from_tcp;
         flange_from_tcp.translation.vector += extras.tcp_shift_m;
         base_from_flange * flange_from_tcp
     }
 
-    /// Touch `index`'s ball centre in the part frame divided by the part's scale.
-    fn query(&self, index: usize, extras: &Extras, part_from_base: &Isometry3<f64>) -> Point3<f64> {
-        let base_from_tcp = self.base_from_tcp(index, extras);
-        let mut in_part = part_from_base * Point3::from(base_from_tcp.translation.vector);
+    /// Touch `index`'s ball centre in the base frame.
+    fn centre_in_base(&self, index: usize, extras: &Extras) -> Point3<f64> {
+        Point3::from(self.base_from_tcp(index, extras).translation.vector)
+    }
+
+    /// A ball centre in the part frame divided by the part's scale.
+    fn in_part(
+        centre_in_base: &Point3<f64>,
+        extras: &Extras,
+        part_from_base: &Isometry3<f64>,
+    ) -> Point3<f64> {
+        let mut in_part = part_from_base * centre_in_base;
         in_part.coords /= 1.0 + extras.scale_minus_one;
         in_part
+    }
+
+    /// Touch `index`'s ball centre in the part frame divided by the part's scale.
+    fn query(&self, index: usize, extras: &Extras, part_from_base: &Isometry3<f64>) -> Point3<f64> {
+        Self::in_part(&self.centre_in_base(index, extras), extras, part_from_base)
+    }
+
+    /// The signed closest point of touch `index`'s (scaled, part-frame) ball centre.
+    fn closest(&self, index: usize, query: &Point3<f64>) -> crate::geometry::SignedClosest {
+        let hint = self.hints[index].load(Ordering::Relaxed);
+        let found = self
+            .mesh
+            .signed_closest_near(query, (hint != NO_HINT).then_some(hint));
+        self.hints[index].store(found.triangle, Ordering::Relaxed);
+        found
     }
 
     fn radius(&self, extras: &Extras) -> f64 {
@@ -135,7 +209,7 @@ impl Problem<'_> {
             .kept(skip)
             .map(|index| {
                 let query = self.query(index, &extras, &part_from_base);
-                let found = self.mesh.signed_closest(&query);
+                let found = self.closest(index, &query);
                 found.signed_distance_m * scale - self.radius(&extras)
             })
             .collect();
@@ -154,26 +228,36 @@ impl Problem<'_> {
         let extras = self.extras(params, theta);
         let part_from_base = self.pose(theta).inverse();
         let kept: Vec<usize> = self.kept(skip).collect();
+        // The pose columns move the part, not the ball centres: those are computed once.
+        let centres: Vec<Point3<f64>> = kept
+            .iter()
+            .map(|&index| self.centre_in_base(index, &extras))
+            .collect();
         let planes: Vec<(Point3<f64>, Vector3<f64>, f64)> = kept
             .iter()
-            .map(|&index| {
-                let query = self.query(index, &extras, &part_from_base);
-                let found = self.mesh.signed_closest(&query);
+            .zip(&centres)
+            .map(|(&index, centre)| {
+                let query = Self::in_part(centre, &extras, &part_from_base);
+                let found = self.closest(index, &query);
                 (query, found.gradient, found.signed_distance_m)
             })
             .collect();
-        let linearised = |theta: &DVector<f64>| -> DVector<f64> {
+        let linearised = |theta: &DVector<f64>, column: usize| -> DVector<f64> {
             let extras = self.extras(params, theta);
             let part_from_base = self.pose(theta).inverse();
             let scale = 1.0 + extras.scale_minus_one;
             DVector::from_iterator(
                 kept.len(),
-                kept.iter()
-                    .zip(&planes)
-                    .map(|(&index, (at, gradient, distance))| {
-                        let query = self.query(index, &extras, &part_from_base);
+                kept.iter().zip(&centres).zip(&planes).map(
+                    |((&index, centre), (at, gradient, distance))| {
+                        let query = if column < 6 {
+                            Self::in_part(centre, &extras, &part_from_base)
+                        } else {
+                            self.query(index, &extras, &part_from_base)
+                        };
                         (distance + gradient.dot(&(query - at))) * scale - self.radius(&extras)
-                    }),
+                    },
+                ),
             )
         };
         let mut jacobian = DMatrix::zeros(kept.len(), theta.len());
@@ -186,7 +270,8 @@ impl Problem<'_> {
             let (mut plus, mut minus) = (theta.clone(), theta.clone());
             plus[column] += step;
             minus[column] -= step;
-            let difference = (linearised(&plus) - linearised(&minus)) / (2.0 * step);
+            let difference =
+                (linearised(&plus, column) - linearised(&minus, column)) / (2.0 * step);
             jacobian.set_column(column, &difference);
         }
         jacobian

@@ -7,11 +7,14 @@
 //! features alike. A mesh that is not closed or not orientable still works with unsigned distances
 //! and face normals; [`Mesh::is_watertight`] says which, and [`Mesh::notes`] why.
 
+use std::sync::OnceLock;
+
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as GlamVector;
 use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
+use super::facing_tree::{FacingTree, Feature};
 use super::spread::{PrincipalSpread, human_length, implausible_size_warning};
 
 /// A vertex spread (standard deviation) below this fraction of the largest one is no spread at
@@ -78,6 +81,10 @@ pub struct Mesh {
     bounds: (Point3<f64>, Point3<f64>),
     /// Which of `notes` warns that the size is implausible for a part (a unit mistake).
     size_note: Option<usize>,
+    /// Unit normal of every triangle: the coherent searches test one per candidate triangle.
+    face_normals: Vec<Vector3<f64>>,
+    /// Built on the first facing query: registration of clouds never asks one.
+    facing_tree: OnceLock<FacingTree>,
 }
 
 fn to_glam(p: &Point3<f64>) -> GlamVector {
@@ -177,6 +184,9 @@ impl Mesh {
                 notes.push(warning);
                 notes.len() - 1
             });
+        let face_normals = (0..trimesh.num_triangles() as u32)
+            .map(|i| from_glam(trimesh.triangle(i).scaled_normal()).normalize())
+            .collect();
         Ok(Self {
             trimesh,
             watertight,
@@ -185,6 +195,8 @@ impl Mesh {
             radius_m,
             bounds,
             size_note,
+            face_normals,
+            facing_tree: OnceLock::new(),
         })
     }
 
@@ -263,7 +275,7 @@ impl Mesh {
 
     /// Unit normal of a triangle.
     pub fn triangle_normal(&self, triangle: u32) -> Vector3<f64> {
-        from_glam(self.trimesh.triangle(triangle).scaled_normal()).normalize()
+        self.face_normals[triangle as usize]
     }
 
     /// Area of a triangle, m^2.
@@ -326,40 +338,87 @@ impl Mesh {
                 false,
                 max_distance_m,
             )?;
-        let point = from_glam(projection.point);
+        let feature = match location {
+            TrianglePointLocation::OnVertex(i) => Feature::Vertex(i),
+            TrianglePointLocation::OnEdge(i, _) => Feature::Edge(i),
+            TrianglePointLocation::OnFace(..) | TrianglePointLocation::OnSolid => Feature::Face,
+        };
+        Some(self.surface_point(query, triangle, &from_glam(projection.point), feature))
+    }
+
+    /// The closest surface point to `query` among the triangles whose unit normal lies within
+    /// `cone_rad` of `facing` (the faces a probe approaching along `-facing` could touch), or
+    /// `None` when no such triangle lies within `max_distance_m`. One descent of a tree that
+    /// bounds normals as well as places. `normal` is the triangle's own normal, the one that
+    /// constrains a touch matched to it.
+    pub fn closest_point_facing(
+        &self,
+        query: &Point3<f64>,
+        facing: &Vector3<f64>,
+        cone_rad: f64,
+        hint: Option<u32>,
+    ) -> Option<SurfacePoint> {
+        let found =
+            self.facing_tree()
+                .closest(query, Some((facing, cone_rad)), f64::INFINITY, hint)?;
+        let mut surface =
+            self.surface_point(query, found.triangle, &found.point.coords, found.feature);
+        surface.normal = self.face_normals[found.triangle as usize];
+        Some(surface)
+    }
+
+    fn facing_tree(&self) -> &FacingTree {
+        self.facing_tree.get_or_init(|| {
+            let corners: Vec<[Vector3<f64>; 3]> = (0..self.trimesh.num_triangles() as u32)
+                .map(|i| {
+                    let triangle = self.trimesh.triangle(i);
+                    [triangle.a, triangle.b, triangle.c].map(from_glam)
+                })
+                .collect();
+            FacingTree::new(&corners, &self.face_normals, self.size_m())
+        })
+    }
+
+    /// A projection onto `triangle` as a [`SurfacePoint`]: the pseudo-normal on edges and
+    /// vertices of an oriented mesh, and the side it gives (a point behind it is inside).
+    fn surface_point(
+        &self,
+        query: &Point3<f64>,
+        triangle: u32,
+        point: &Vector3<f64>,
+        feature: Feature,
+    ) -> SurfacePoint {
+        let point = *point;
         let face_normal = self.triangle_normal(triangle);
-        let (normal, on_face) = match (location, self.trimesh.pseudo_normals_if_oriented()) {
-            (TrianglePointLocation::OnEdge(edge, _), Some(pseudo)) => (
+        let (normal, on_face) = match (feature, self.trimesh.pseudo_normals_if_oriented()) {
+            (Feature::Edge(edge), Some(pseudo)) => (
                 from_glam(pseudo.edges_pseudo_normal[triangle as usize][edge as usize]),
                 false,
             ),
-            (TrianglePointLocation::OnVertex(corner), Some(pseudo)) => {
+            (Feature::Vertex(corner), Some(pseudo)) => {
                 let vertex = self.trimesh.indices()[triangle as usize][corner as usize];
                 (
                     from_glam(pseudo.vertices_pseudo_normal[vertex as usize]),
                     false,
                 )
             }
-            (TrianglePointLocation::OnFace(..) | TrianglePointLocation::OnSolid, _) => {
-                (face_normal, true)
-            }
+            (Feature::Face, _) => (face_normal, true),
             _ => (face_normal, false),
         };
         let normal = normal.try_normalize(1e-15).unwrap_or(face_normal);
         let offset = query.coords - point;
         let distance = offset.norm();
-        let signed_distance = if self.watertight && projection.is_inside {
-            -distance
-        } else {
-            distance
-        };
-        Some(SurfacePoint {
+        // parry's inside test for a trimesh: behind the pseudo-normal of the closest feature
+        // (the face normal inside a face). Redone here because single-triangle projections, as
+        // the coherent search makes them, do not know the mesh's pseudo-normals.
+        let inside = self.watertight && offset.dot(&normal) <= 0.0;
+        SurfacePoint {
             point: Point3::from(point),
             normal,
-            signed_distance,
+            signed_distance: if inside { -distance } else { distance },
             triangle,
             on_face,
-        })
+        }
     }
 }
 
@@ -374,6 +433,8 @@ pub struct SignedClosest {
     pub signed_distance_m: f64,
     /// The closest triangle's own unit normal.
     pub face_normal: Vector3<f64>,
+    /// The closest triangle: a hint for the next query near this one.
+    pub triangle: u32,
 }
 
 impl Mesh {
@@ -383,7 +444,19 @@ impl Mesh {
     /// outside). Flipping the side towards the probe was tried and lost the part: a side contact
     /// at 90 degrees meets the face with its normal square to the probe, and noise then flips it.
     pub fn signed_closest(&self, query: &Point3<f64>) -> SignedClosest {
-        let found = self.closest_point(query);
+        self.signed_closest_near(query, None)
+    }
+
+    /// [`Mesh::signed_closest`] with `hint`, the triangle a nearby query found (the same touch
+    /// at the previous step of a fit): the search then opens only nodes nearer than it.
+    pub fn signed_closest_near(&self, query: &Point3<f64>, hint: Option<u32>) -> SignedClosest {
+        let found = match self.facing_tree().closest(query, None, f64::INFINITY, hint) {
+            Some(found) => {
+                self.surface_point(query, found.triangle, &found.point.coords, found.feature)
+            }
+            // Only a query that is not finite finds nothing.
+            None => self.closest_point(query),
+        };
         let face_normal = self.triangle_normal(found.triangle);
         let offset = query - found.point;
         let distance = offset.norm();
@@ -410,6 +483,7 @@ impl Mesh {
             gradient,
             signed_distance_m,
             face_normal,
+            triangle: found.triangle,
         }
     }
 }

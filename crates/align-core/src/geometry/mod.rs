@@ -2,6 +2,7 @@
 //! queries ([`Mesh`]), built on parry3d's BVH (glam types stay inside this module).
 
 mod distance_grid;
+mod facing_tree;
 mod mesh;
 pub mod shapes;
 mod spread;

@@ -74,6 +74,9 @@ pub(super) struct Workspace<'t> {
     fixed: Vec<Point3<f64>>,
     /// Touches whose contact at the last matching was incoherent.
     incoherent: usize,
+    /// Each touch's last matched triangle: successive poses move a touch little, so it bounds
+    /// the next closest-point search from the start.
+    hints: Vec<Option<u32>>,
     /// Abandon a local run whose RMS is still above this after its first full steps.
     pub(super) abandon_above: Option<f64>,
     /// Whether runs go on past the head-on stage to the least-squares polish (off for the
@@ -103,6 +106,7 @@ impl<'t> Workspace<'t> {
             weights: Vec::with_capacity(count),
             fixed: touches.iter().map(|touch| touch.point).collect(),
             incoherent: 0,
+            hints: vec![None; count],
             abandon_above: None,
             polish: true,
         })
@@ -118,7 +122,7 @@ impl<'t> Workspace<'t> {
 
     /// The contact of touch `index` at the pose whose inverse is `part_from_base`.
     fn contact(
-        &self,
+        &mut self,
         index: usize,
         part_from_base: &Isometry3<f64>,
         matching: Matching,
@@ -129,17 +133,23 @@ impl<'t> Workspace<'t> {
             .approach
             .and_then(|approach| (part_from_base.rotation * -approach).try_normalize(1e-12));
         let cone = self.options.coherence_cone_rad;
+        let hint = self.hints[index];
         // Where no surface faces the probe at this pose, the plain contact, marked incoherent.
-        if let Matching::Guided(guide_cone) = matching
+        let contact = if let Matching::Guided(guide_cone) = matching
             && self.options.coherence
             && touch.face.is_none()
             && let Some(facing) = &facing
-            && let Some(found) = self.target.guided_contact(&in_part, facing, guide_cone)
+            && let Some(found) = self
+                .target
+                .guided_contact(&in_part, facing, guide_cone, hint)
         {
-            return found;
-        }
-        self.target
-            .plain_contact(self.surfaces[index], &in_part, facing.as_ref(), cone)
+            found
+        } else {
+            self.target
+                .plain_contact(self.surfaces[index], &in_part, facing.as_ref(), cone, hint)
+        };
+        self.hints[index] = Some(contact.triangle);
+        contact
     }
 
     /// The surface point each touch corresponds to at `pose`, offset by the ball radius along
@@ -462,7 +472,7 @@ impl<'t> Workspace<'t> {
 
     /// Each touch's signed distance from the aligned surface (ball radius removed) at its plain
     /// contact, and whether that contact is coherent.
-    pub(super) fn residuals(&self, pose: &Isometry3<f64>) -> Vec<(TouchResidual, bool)> {
+    pub(super) fn residuals(&mut self, pose: &Isometry3<f64>) -> Vec<(TouchResidual, bool)> {
         let part_from_base = pose.inverse();
         (0..self.touches.len())
             .map(|index| {

@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use nalgebra::{Point3, Vector3};
 
 use super::Touch;
-use crate::geometry::{Mesh, SurfacePoint};
+use crate::geometry::Mesh;
 use crate::registration::RegistrationError;
 
 /// A named planar face of a part (a datum feature), in the part frame.
@@ -24,32 +24,6 @@ pub struct Face {
 pub struct PsaTarget<'a> {
     mesh: &'a Mesh,
     faces: HashMap<String, Mesh>,
-    /// The mesh's triangles grouped by normal direction, for coherent searches.
-    normal_bins: Vec<NormalBin>,
-}
-
-#[derive(Debug)]
-struct NormalBin {
-    direction: Vector3<f64>,
-    mesh: Mesh,
-}
-
-/// Bin directions: the 26 neighbours of a cube's centre (faces, edges, corners), about 27 degrees
-/// apart, so a triangle's normal is never more than about 35 degrees from its bin's direction.
-const BIN_RADIUS_RAD: f64 = 0.62;
-
-fn bin_directions() -> Vec<Vector3<f64>> {
-    let mut directions = Vec::with_capacity(26);
-    for x in -1..=1 {
-        for y in -1..=1 {
-            for z in -1..=1 {
-                if (x, y, z) != (0, 0, 0) {
-                    directions.push(Vector3::new(x as f64, y as f64, z as f64).normalize());
-                }
-            }
-        }
-    }
-    directions
 }
 
 /// Where a touch meets the surface, in the part frame.
@@ -65,35 +39,15 @@ pub(super) struct Contact {
     /// False when the touched face turns away from the probe by more than the coherence cone:
     /// the ball could not have touched it with its front.
     pub coherent: bool,
+    /// The triangle matched: the next query of this touch starts from it.
+    pub triangle: u32,
 }
 
 impl<'a> PsaTarget<'a> {
     pub fn new(mesh: &'a Mesh) -> Self {
-        let vertices: Vec<Point3<f64>> = mesh.vertices().collect();
-        let directions = bin_directions();
-        let mut members: Vec<Vec<[u32; 3]>> = vec![Vec::new(); directions.len()];
-        for (index, triangle) in mesh.triangles().iter().enumerate() {
-            let normal = mesh.triangle_normal(index as u32);
-            let nearest = directions
-                .iter()
-                .enumerate()
-                .max_by(|a, b| normal.dot(a.1).total_cmp(&normal.dot(b.1)))
-                .map_or(0, |(bin, _)| bin);
-            members[nearest].push(*triangle);
-        }
-        let normal_bins = directions
-            .into_iter()
-            .zip(members)
-            .filter_map(|(direction, triangles)| {
-                Mesh::new(&vertices, &triangles)
-                    .ok()
-                    .map(|mesh| NormalBin { direction, mesh })
-            })
-            .collect();
         Self {
             mesh,
             faces: HashMap::new(),
-            normal_bins,
         }
     }
 
@@ -156,89 +110,46 @@ impl<'a> PsaTarget<'a> {
     /// The ball meets a surface with any point of its front hemisphere, so a contact is coherent
     /// while the face's normal lies within `cone_rad` of `facing` (90 degrees plus a margin for
     /// stylus and normal errors). On a mesh that is not closed, the face normal's side is
-    /// outside ([`Mesh::signed_closest`]).
+    /// outside ([`Mesh::signed_closest`]). `hint` is the touch's previous triangle.
     pub(super) fn plain_contact(
         &self,
         surface: &Mesh,
         in_part: &Point3<f64>,
         facing: Option<&Vector3<f64>>,
         cone_rad: f64,
+        hint: Option<u32>,
     ) -> Contact {
-        let found = surface.signed_closest(in_part);
+        let found = surface.signed_closest_near(in_part, hint);
         let coherent = facing.is_none_or(|f| found.face_normal.dot(f) >= cone_rad.cos());
         Contact {
             point: found.point,
             normal: found.gradient,
             signed_distance_m: found.signed_distance_m,
             coherent,
+            triangle: found.triangle,
         }
     }
 
     /// The touch's guided contact: the closest surface point whose face turns towards the probe
     /// (within `cone_rad` of `facing`), so that a touch pushed through the part by a wrong pose
     /// still finds the face it touched, not the back of the wall. `None` when no such surface
-    /// exists.
+    /// exists. `facing` is unit, in the part frame; `hint` is the touch's previous triangle.
     pub(super) fn guided_contact(
         &self,
         in_part: &Point3<f64>,
         facing: &Vector3<f64>,
         cone_rad: f64,
+        hint: Option<u32>,
     ) -> Option<Contact> {
-        let found = self.closest_coherent(in_part, facing, cone_rad)?;
+        let found = self
+            .mesh
+            .closest_point_facing(in_part, facing, cone_rad, hint)?;
         Some(Contact {
             point: found.point,
             normal: found.normal,
             signed_distance_m: found.signed_distance,
             coherent: true,
-        })
-    }
-
-    /// The closest surface point whose face normal lies within `cone_rad` of `facing` (unit,
-    /// part frame), or `None` when no such surface exists.
-    fn closest_coherent(
-        &self,
-        query: &Point3<f64>,
-        facing: &Vector3<f64>,
-        cone_rad: f64,
-    ) -> Option<SurfacePoint> {
-        let cos_cone = cone_rad.cos();
-        // Usually the plain closest point is coherent, and then it is also the closest coherent
-        // one: one BVH query instead of one per bin.
-        let mut plain = self.mesh.closest_point(query);
-        let face_normal = self.mesh.triangle_normal(plain.triangle);
-        if face_normal.dot(facing) >= cos_cone {
-            // On an edge the pseudo-normal blends in the incoherent neighbour; the touched face's
-            // own normal is the one that constrains this touch.
-            plain.normal = face_normal;
-            return Some(plain);
-        }
-        let bin_reach = (cone_rad + BIN_RADIUS_RAD).min(std::f64::consts::PI).cos();
-        let mut best: Option<SurfacePoint> = None;
-        for bin in &self.normal_bins {
-            if bin.direction.dot(facing) < bin_reach {
-                continue;
-            }
-            let limit = best.map_or(f64::MAX, |b| b.signed_distance.abs());
-            let Some(found) = bin.mesh.closest_point_within(query, limit) else {
-                continue;
-            };
-            let normal = bin.mesh.triangle_normal(found.triangle);
-            if normal.dot(facing) < cos_cone {
-                continue;
-            }
-            if best.is_none_or(|b| found.signed_distance.abs() < b.signed_distance.abs()) {
-                best = Some(SurfacePoint { normal, ..found });
-            }
-        }
-        best.map(|mut found| {
-            // Bins are open sub-meshes: recover the side from the face normal.
-            let side = (query - found.point).dot(&found.normal);
-            found.signed_distance = if side < 0.0 && self.mesh.is_watertight() {
-                -found.signed_distance.abs()
-            } else {
-                found.signed_distance.abs()
-            };
-            found
+            triangle: found.triangle,
         })
     }
 }
