@@ -2,13 +2,13 @@
 //! surface as a function of the part pose and the effect parameters, its Jacobian, and a
 //! Levenberg-Marquardt fit.
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::Mutex;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::effects::Effect;
 use super::{Fit, TouchSample};
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, NearbyTriangles, SignedClosest};
 use crate::kinematics::Chain;
 use crate::tool::Tool;
 
@@ -52,13 +52,11 @@ pub(super) struct Problem<'a> {
     /// Each touch's flange pose with no effect applied: fits that change no joint (the pose
     /// alone, TCP, radius, scale) reuse it instead of running the kinematics per evaluation.
     nominal_base_from_flange: Vec<Isometry3<f64>>,
-    /// Each touch's last closest triangle ([`NO_HINT`] before the first): successive
-    /// evaluations move a touch little, so it bounds the next search. Atomic so that fits may
-    /// share the problem across threads; any triangle is a valid hint.
-    hints: Vec<AtomicU32>,
+    /// The triangles near each touch's last query: successive evaluations move a touch
+    /// little, so most queries scan only those. Behind a lock so that fits may share the
+    /// problem across threads; the answers do not depend on what the cache holds.
+    nearby: Vec<Mutex<NearbyTriangles>>,
 }
-
-const NO_HINT: u32 = u32::MAX;
 
 impl<'a> Problem<'a> {
     pub fn new(
@@ -87,7 +85,10 @@ impl<'a> Problem<'a> {
             centre: mesh.centroid(),
             gravity_torques_nm,
             nominal_base_from_flange,
-            hints: touches.iter().map(|_| AtomicU32::new(NO_HINT)).collect(),
+            nearby: touches
+                .iter()
+                .map(|_| Mutex::new(NearbyTriangles::default()))
+                .collect(),
         }
     }
 }
@@ -178,13 +179,12 @@ impl Problem<'_> {
     }
 
     /// The signed closest point of touch `index`'s (scaled, part-frame) ball centre.
-    fn closest(&self, index: usize, query: &Point3<f64>) -> crate::geometry::SignedClosest {
-        let hint = self.hints[index].load(Ordering::Relaxed);
-        let found = self
-            .mesh
-            .signed_closest_near(query, (hint != NO_HINT).then_some(hint));
-        self.hints[index].store(found.triangle, Ordering::Relaxed);
-        found
+    fn closest(&self, index: usize, query: &Point3<f64>) -> SignedClosest {
+        match self.nearby[index].lock() {
+            Ok(mut nearby) => self.mesh.signed_closest_cached(query, &mut nearby),
+            // A fit that panicked elsewhere poisoned the lock; the plain query needs no cache.
+            Err(_) => self.mesh.signed_closest(query),
+        }
     }
 
     fn radius(&self, extras: &Extras) -> f64 {

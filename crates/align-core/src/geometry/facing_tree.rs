@@ -277,6 +277,115 @@ impl FacingTree {
     }
 }
 
+/// The triangles near one query point, remembered so that the next queries close to it (the same
+/// touch at the next step of a fit) scan a handful of triangles instead of descending the tree.
+///
+/// Exact: with `d` the closest distance at the anchor `a`, every query `q` with |q - a| <= r has
+/// its closest triangle among those within `d + 2 r` of `a` (that triangle is within
+/// `d + r` of `q`, so within `d + 2 r` of `a`).
+#[derive(Debug, Clone, Default)]
+pub struct NearbyTriangles {
+    anchor: Vector3<f64>,
+    reach_m: f64,
+    /// Tree slots within `d + 2 reach` of the anchor; filled on the first query that lands
+    /// within reach, so that a run of far-apart queries pays for none.
+    slots: Vec<u32>,
+    filled: bool,
+    /// Squared distance up to which `slots` were collected.
+    collected_squared: f64,
+    /// The last answer, a hint for the next descent.
+    last_triangle: Option<u32>,
+}
+
+/// A query within this fraction of the closest distance of the anchor (at most
+/// [`MAX_REACH_FRACTION`] of the part's size, at least [`MIN_REACH_FRACTION`] of it) reuses its
+/// triangles. The triangles kept are those on the patch of radius about sqrt(4 d r) around the
+/// closest point: the cap keeps the patch small for a query far from the part.
+const REACH_OF_DISTANCE: f64 = 0.5;
+const MIN_REACH_FRACTION: f64 = 1e-3;
+const MAX_REACH_FRACTION: f64 = 1e-2;
+
+impl FacingTree {
+    /// Like [`FacingTree::closest`] without a cone, answered from `cache` when the query lies
+    /// within its reach and by a descent (which re-anchors the cache) otherwise.
+    pub fn closest_cached(
+        &self,
+        query: &Point3<f64>,
+        cache: &mut NearbyTriangles,
+        size_m: f64,
+    ) -> Option<Closest> {
+        let q = query.coords;
+        if cache.reach_m > 0.0 && (q - cache.anchor).norm() <= cache.reach_m {
+            if !cache.filled {
+                cache.slots.clear();
+                self.collect_within(&cache.anchor, cache.collected_squared, &mut cache.slots);
+                cache.filled = true;
+            }
+            let mut best: Option<Closest> = None;
+            let mut best_squared = f64::INFINITY;
+            for &slot in &cache.slots {
+                let [a, b, c] = &self.corners[slot as usize];
+                let (point, feature) = closest_on_triangle(&q, a, b, c);
+                let squared = (point - q).norm_squared();
+                if squared < best_squared {
+                    best_squared = squared;
+                    best = Some(Closest {
+                        triangle: self.original[slot as usize],
+                        point: Point3::from(point),
+                        distance_m: 0.0,
+                        feature,
+                    });
+                }
+            }
+            if let Some(mut found) = best {
+                found.distance_m = best_squared.sqrt();
+                cache.last_triangle = Some(found.triangle);
+                return Some(found);
+            }
+        }
+        let found = self.closest(query, None, f64::INFINITY, cache.last_triangle)?;
+        let reach = (REACH_OF_DISTANCE * found.distance_m)
+            .clamp(MIN_REACH_FRACTION * size_m, MAX_REACH_FRACTION * size_m);
+        let collect = found.distance_m + 2.0 * reach;
+        *cache = NearbyTriangles {
+            anchor: q,
+            reach_m: reach,
+            slots: std::mem::take(&mut cache.slots),
+            filled: false,
+            collected_squared: collect * collect,
+            last_triangle: Some(found.triangle),
+        };
+        Some(found)
+    }
+
+    /// Appends the slots of every triangle within `sqrt(limit_squared)` of `centre`.
+    fn collect_within(&self, centre: &Vector3<f64>, limit_squared: f64, out: &mut Vec<u32>) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        stack.push(0);
+        while let Some(index) = stack.pop() {
+            let node = &self.nodes[index as usize];
+            if box_distance_squared(node, centre) > limit_squared {
+                continue;
+            }
+            if node.count > 0 {
+                for slot in node.first..node.first + node.count {
+                    let [a, b, c] = &self.corners[slot as usize];
+                    let (point, _) = closest_on_triangle(centre, a, b, c);
+                    if (point - centre).norm_squared() <= limit_squared {
+                        out.push(slot);
+                    }
+                }
+            } else {
+                stack.push(node.first);
+                stack.push(node.first + 1);
+            }
+        }
+    }
+}
+
 fn box_distance_squared(node: &Node, q: &Vector3<f64>) -> f64 {
     let below = node.lower - q;
     let above = q - node.upper;
@@ -411,6 +520,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn cached_queries_find_what_a_descent_finds() {
+        let mut rng = SplitMix64::new(11);
+        let corners = random_triangles(400, &mut rng);
+        let normals: Vec<Vector3<f64>> = corners
+            .iter()
+            .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
+            .collect();
+        let tree = FacingTree::new(&corners, &normals, 2.0);
+        let mut cache = NearbyTriangles::default();
+        let mut query = Point3::new(0.3, -0.2, 0.4);
+        let mut reused = 0;
+        for _ in 0..2000 {
+            // A random walk with steps from far below to far above the cache's reach.
+            let step = 10f64.powf(between(&mut rng, -4.0, -0.5));
+            query += rng.unit_vector() * step;
+            let expected = tree.closest(&query, None, f64::INFINITY, None).expect("found");
+            let found = tree.closest_cached(&query, &mut cache, 2.0).expect("found");
+            reused += usize::from(cache.filled);
+            assert!((found.distance_m - expected.distance_m).abs() < 1e-12);
+        }
+        assert!(reused > 200, "the cache answered only {reused} of 2000");
     }
 
     #[test]

@@ -14,7 +14,7 @@ use parry3d_f64::math::Vector as GlamVector;
 use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
-use super::facing_tree::{FacingTree, Feature};
+use super::facing_tree::{Closest, FacingTree, Feature, NearbyTriangles};
 use super::spread::{PrincipalSpread, human_length, implausible_size_warning};
 
 /// A vertex spread (standard deviation) below this fraction of the largest one is no spread at
@@ -444,13 +444,33 @@ impl Mesh {
     /// outside). Flipping the side towards the probe was tried and lost the part: a side contact
     /// at 90 degrees meets the face with its normal square to the probe, and noise then flips it.
     pub fn signed_closest(&self, query: &Point3<f64>) -> SignedClosest {
-        self.signed_closest_near(query, None)
+        let found = self.facing_tree().closest(query, None, f64::INFINITY, None);
+        self.signed_from(query, found)
     }
 
     /// [`Mesh::signed_closest`] with `hint`, the triangle a nearby query found (the same touch
-    /// at the previous step of a fit): the search then opens only nodes nearer than it.
+    /// at the previous step of a search): the descent then opens only nodes nearer than it.
     pub fn signed_closest_near(&self, query: &Point3<f64>, hint: Option<u32>) -> SignedClosest {
-        let found = match self.facing_tree().closest(query, None, f64::INFINITY, hint) {
+        let found = self.facing_tree().closest(query, None, f64::INFINITY, hint);
+        self.signed_from(query, found)
+    }
+
+    /// [`Mesh::signed_closest`] for a query that moves a little from call to call (a touch at
+    /// successive steps of a fit): `cache` remembers the triangles near the last one, and a
+    /// query within their reach scans only those. The answer is the same as without it.
+    pub fn signed_closest_cached(
+        &self,
+        query: &Point3<f64>,
+        cache: &mut NearbyTriangles,
+    ) -> SignedClosest {
+        let found = self
+            .facing_tree()
+            .closest_cached(query, cache, self.size_m());
+        self.signed_from(query, found)
+    }
+
+    fn signed_from(&self, query: &Point3<f64>, found: Option<Closest>) -> SignedClosest {
+        let found = match found {
             Some(found) => {
                 self.surface_point(query, found.triangle, &found.point.coords, found.feature)
             }
