@@ -180,6 +180,22 @@ impl FacingTree {
         max_distance_m: f64,
         hint: Option<u32>,
     ) -> Option<Closest> {
+        self.closest_within_slack(query, facing, max_distance_m, hint, 1.0)
+    }
+
+    /// [`FacingTree::closest`], approximate by at most a factor `slack` (>= 1): the triangle
+    /// found is no farther than `slack` times the closest one. A search that only needs to know
+    /// which way the surface lies (the global search's exploration, whose queries are mostly
+    /// tens of millimetres off a part at a wrong orientation) opens far fewer nodes: the exact
+    /// answer must rule out every node the sphere through the best triangle touches.
+    pub fn closest_within_slack(
+        &self,
+        query: &Point3<f64>,
+        facing: Option<(&Vector3<f64>, f64)>,
+        max_distance_m: f64,
+        hint: Option<u32>,
+        slack: f64,
+    ) -> Option<Closest> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -229,7 +245,10 @@ impl FacingTree {
         }
         let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
         stack.push((0, box_distance_squared(&self.nodes[0], &q)));
+        // A node is opened only if it could hold a triangle nearer than the best by the slack.
+        let slack_squared = slack * slack;
         while let Some((index, lower_bound)) = stack.pop() {
+            let lower_bound = lower_bound * slack_squared;
             if lower_bound >= best_squared {
                 continue;
             }
@@ -523,6 +542,38 @@ mod tests {
     }
 
     #[test]
+    fn a_search_with_slack_stays_within_its_factor_and_facing() {
+        let mut rng = SplitMix64::new(5);
+        let corners = random_triangles(500, &mut rng);
+        let normals: Vec<Vector3<f64>> = corners
+            .iter()
+            .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
+            .collect();
+        let tree = FacingTree::new(&corners, &normals, 2.0);
+        let mut inexact = 0;
+        for _ in 0..500 {
+            // Queries near and far (up to a few part sizes off).
+            let query = Point3::from(rng.unit_vector() * 10f64.powf(between(&mut rng, -1.0, 0.8)));
+            let facing = rng.unit_vector();
+            let filter = Some((&facing, std::f64::consts::FRAC_PI_4));
+            let exact = tree.closest(&query, filter, f64::INFINITY, None);
+            let loose = tree.closest_within_slack(&query, filter, f64::INFINITY, None, 1.5);
+            let (Some(exact), Some(loose)) = (exact, loose) else {
+                assert!(exact.is_none() && loose.is_none());
+                continue;
+            };
+            assert!(loose.distance_m <= 1.5 * exact.distance_m + 1e-12);
+            assert!(loose.distance_m >= exact.distance_m - 1e-12);
+            assert!(normals[loose.triangle as usize].dot(&facing) >= FRAC_PI_4_COS);
+            inexact += usize::from(loose.distance_m > exact.distance_m + 1e-12);
+        }
+        // The slack is used (else the test proves nothing about the bound).
+        assert!(inexact > 0, "every answer was exact");
+    }
+
+    const FRAC_PI_4_COS: f64 = std::f64::consts::FRAC_1_SQRT_2 - 1e-12;
+
+    #[test]
     fn cached_queries_find_what_a_descent_finds() {
         let mut rng = SplitMix64::new(11);
         let corners = random_triangles(400, &mut rng);
@@ -538,7 +589,9 @@ mod tests {
             // A random walk with steps from far below to far above the cache's reach.
             let step = 10f64.powf(between(&mut rng, -4.0, -0.5));
             query += rng.unit_vector() * step;
-            let expected = tree.closest(&query, None, f64::INFINITY, None).expect("found");
+            let expected = tree
+                .closest(&query, None, f64::INFINITY, None)
+                .expect("found");
             let found = tree.closest_cached(&query, &mut cache, 2.0).expect("found");
             reused += usize::from(cache.filled);
             assert!((found.distance_m - expected.distance_m).abs() < 1e-12);

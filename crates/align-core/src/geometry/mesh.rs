@@ -348,19 +348,25 @@ impl Mesh {
 
     /// The closest surface point to `query` among the triangles whose unit normal lies within
     /// `cone_rad` of `facing` (the faces a probe approaching along `-facing` could touch), or
-    /// `None` when no such triangle lies within `max_distance_m`. One descent of a tree that
-    /// bounds normals as well as places. `normal` is the triangle's own normal, the one that
-    /// constrains a touch matched to it.
+    /// `None` when the part has no such triangle. One descent of a tree that bounds normals as
+    /// well as places. `normal` is the triangle's own normal, the one that constrains a touch
+    /// matched to it. `hint` is the answer to a nearby query; with `slack` > 1 the answer may be
+    /// up to `slack` times farther than the closest (1: exact).
     pub fn closest_point_facing(
         &self,
         query: &Point3<f64>,
         facing: &Vector3<f64>,
         cone_rad: f64,
         hint: Option<u32>,
+        slack: f64,
     ) -> Option<SurfacePoint> {
-        let found =
-            self.facing_tree()
-                .closest(query, Some((facing, cone_rad)), f64::INFINITY, hint)?;
+        let found = self.facing_tree().closest_within_slack(
+            query,
+            Some((facing, cone_rad)),
+            f64::INFINITY,
+            hint,
+            slack,
+        )?;
         let mut surface =
             self.surface_point(query, found.triangle, &found.point.coords, found.feature);
         surface.normal = self.face_normals[found.triangle as usize];

@@ -29,6 +29,11 @@ const EXPLORATION_TOUCHES: usize = 24;
 /// the result, does not depend on how many threads run them.
 const EXPLORATION_CHUNK: usize = 32;
 
+/// The exploration's guided contacts may lie this factor farther than the closest facing
+/// surface: its queries are mostly tens of millimetres off the part, where an exact answer
+/// must open every node the sphere through the best triangle meets.
+const EXPLORATION_SLACK: f64 = 1.5;
+
 /// Poses scoring within this of the best fit alike (-2 log-likelihood units): a tie between
 /// symmetric twins, not evidence.
 const EXACT_TIE_CHI2: f64 = 0.1;
@@ -59,6 +64,10 @@ fn run_chunks(
             .map(|start| {
                 Workspace::new(target, touches, options).map(|mut explorer| {
                     explorer.polish = false;
+                    explorer.guided_slack = EXPLORATION_SLACK;
+                    // Only where each start leads matters here: a step that does not descend is
+                    // damped at once rather than halved.
+                    explorer.halvings_before_damping = 0;
                     explorer.abandon_above = abandon_above;
                     explorer.run_local(start)
                 })
@@ -103,16 +112,29 @@ fn spread_subset(touches: &[Touch], count: usize) -> Vec<Touch> {
     chosen.into_iter().map(|i| touches[i].clone()).collect()
 }
 
+/// The screened starts of the exploration: where a few steps from each led.
+pub(super) struct Screened {
+    /// The spread subset of the touches the exploration matches.
+    subset: Vec<Touch>,
+    /// The exploration's options (short window, coarse tolerance).
+    explore: PsaOptions,
+    /// Each start's screening run, in the order of the starts.
+    runs: Vec<LocalSolution>,
+    /// The best screening RMS, m.
+    best_rms_m: f64,
+}
+
 /// Short local runs from `count` orientations spread over SO(3), each translated so that the
-/// mesh's centroid sits on the touches' centroid: where each start leads. They run on a spread
-/// subset of the touches, matched head-on only, in parallel.
-pub(super) fn explore(
+/// mesh's centroid sits on the touches' centroid: the slide and a few full steps from every
+/// start, on a spread subset of the touches matched head-on only, in parallel. Their results do
+/// not depend on any other run (no start is abandoned this early), so the local run from the
+/// user's start may run beside them.
+pub(super) fn screen(
     target: &PsaTarget<'_>,
     touches: &[Touch],
     options: &PsaOptions,
     count: usize,
-    best_rms_m: f64,
-) -> Result<Vec<LocalSolution>, RegistrationError> {
+) -> Result<Screened, RegistrationError> {
     let centroid = touches
         .iter()
         .fold(Vector3::zeros(), |sum, touch| sum + touch.point.coords)
@@ -130,7 +152,6 @@ pub(super) fn explore(
     };
     // Fails here, once, rather than in every thread (a face hint naming no face).
     Workspace::new(target, &subset, &explore)?;
-    let mut best_rms = best_rms_m;
     let radius_m = target.mesh().radius_m();
     let starts: Vec<Isometry3<f64>> = spread_rotations(count)
         .into_iter()
@@ -139,22 +160,44 @@ pub(super) fn explore(
             Isometry3::from_parts(Translation3::from(translation), rotation)
         })
         .collect();
-    // Screening: a few steps from every start (the slide and two full steps) say which are
-    // heading for a good fit; only the best quarter runs on.
     let screen = PsaOptions {
         max_iterations: explore.slide_first + SCREENING_STEPS,
         ..explore.clone()
     };
-    let screened = run_chunks(target, &subset, &screen, &starts, &mut best_rms, radius_m)?;
-    let mut order: Vec<usize> = (0..screened.len()).collect();
-    order.sort_by(|a, b| screened[*a].rms_m.total_cmp(&screened[*b].rms_m));
-    let kept = (starts.len() / SCREENING_KEEP_ONE_IN).max(MIN_CONTENDERS * 4);
-    let promising: Vec<Isometry3<f64>> =
-        order.iter().take(kept).map(|&i| screened[i].pose).collect();
+    let mut best_rms_m = f64::INFINITY;
+    let runs = run_chunks(target, &subset, &screen, &starts, &mut best_rms_m, radius_m)?;
+    Ok(Screened {
+        subset,
+        explore,
+        runs,
+        best_rms_m,
+    })
+}
+
+/// The screened starts heading for the best fits (the best quarter) run on to where they lead.
+/// `best_rms_m` is the best fit known besides (the local run from the user's start): starts
+/// still far worse than it after their first steps are abandoned.
+pub(super) fn explore(
+    target: &PsaTarget<'_>,
+    screened: Screened,
+    best_rms_m: f64,
+) -> Result<Vec<LocalSolution>, RegistrationError> {
+    let Screened {
+        subset,
+        explore,
+        runs,
+        best_rms_m: screened_best_m,
+    } = screened;
+    let mut order: Vec<usize> = (0..runs.len()).collect();
+    order.sort_by(|a, b| runs[*a].rms_m.total_cmp(&runs[*b].rms_m));
+    let kept = (runs.len() / SCREENING_KEEP_ONE_IN).max(MIN_CONTENDERS * 4);
+    let promising: Vec<Isometry3<f64>> = order.iter().take(kept).map(|&i| runs[i].pose).collect();
     let continued = PsaOptions {
         slide_first: 0,
         ..explore
     };
+    let mut best_rms = best_rms_m.min(screened_best_m);
+    let radius_m = target.mesh().radius_m();
     let mut solutions = run_chunks(
         target,
         &subset,
@@ -164,7 +207,7 @@ pub(super) fn explore(
         radius_m,
     )?;
     for (solution, &i) in solutions.iter_mut().zip(&order) {
-        solution.iterations += screened[i].iterations;
+        solution.iterations += runs[i].iterations;
     }
     Ok(solutions)
 }
@@ -199,17 +242,20 @@ pub(super) fn contenders(
     distinct
 }
 
-/// Polishes the contenders in full.
+/// Polishes the contenders in full, side by side.
 pub(super) fn polish(
-    workspace: &mut Workspace<'_>,
+    target: &PsaTarget<'_>,
+    touches: &[Touch],
+    options: &PsaOptions,
     contenders: Vec<LocalSolution>,
-) -> Vec<LocalSolution> {
+) -> Result<Vec<LocalSolution>, RegistrationError> {
     contenders
-        .into_iter()
+        .into_par_iter()
         .map(|solution| {
+            let mut workspace = Workspace::new(target, touches, options)?;
             let mut polished = workspace.run_local(&solution.pose);
             polished.iterations += solution.iterations;
-            polished
+            Ok(polished)
         })
         .collect()
 }

@@ -42,6 +42,12 @@ const HEAD_ON_CONE_RAD: f64 = std::f64::consts::FRAC_PI_4;
 /// The largest Levenberg-Marquardt damping tried before a pose counts as stationary.
 const MAX_DAMPING: f64 = 1e4;
 
+/// Halvings of a Gauss-Newton step that does not descend before it is damped instead. One: a
+/// step that overshoots by more than twice mostly leans on a direction the touches barely
+/// constrain, which damping handles and further halvings only approach (three halvings cost the
+/// global search a quarter of its matchings; the trial tables held or improved with one).
+const HALVINGS_BEFORE_DAMPING: i32 = 1;
+
 /// A point-to-plane stage has settled when the pose moves by less than this fraction of the
 /// RMS residual three iterations running: the touches cannot tell such poses apart.
 const SETTLED_FRACTION_OF_RMS: f64 = 1e-4;
@@ -53,6 +59,15 @@ const RELATIVE_DESCENT: f64 = 1e-9;
 const GUIDED_STAGE_ITERATIONS: usize = 40;
 /// Pose tolerance of a steering stage, m.
 const GUIDED_STAGE_TOLERANCE_M: f64 = 1e-7;
+
+/// A copy of a workspace's correspondences.
+#[derive(Debug, Default)]
+struct SavedMatching {
+    moved: Vec<Point3<f64>>,
+    normals: Vec<Vector3<f64>>,
+    weights: Vec<f64>,
+    incoherent: usize,
+}
 
 /// How long one stage may run and when it has settled.
 #[derive(Debug, Clone, Copy)]
@@ -74,6 +89,9 @@ pub(super) struct Workspace<'t> {
     fixed: Vec<Point3<f64>>,
     /// Touches whose contact at the last matching was incoherent.
     incoherent: usize,
+    /// The correspondences at the pose a line search starts from, restored when a step fails
+    /// instead of matched again.
+    saved: SavedMatching,
     /// Each touch's last matched triangle: successive poses move a touch little, so it bounds
     /// the next closest-point search from the start.
     hints: Vec<Option<u32>>,
@@ -82,6 +100,12 @@ pub(super) struct Workspace<'t> {
     /// Whether runs go on past the head-on stage to the least-squares polish (off for the
     /// global search's exploration, which only finds where each start leads).
     pub(super) polish: bool,
+    /// How much farther than the closest facing surface a guided contact may be (1: exact).
+    /// The exploration allows more: it only finds where each start leads.
+    pub(super) guided_slack: f64,
+    /// A Gauss-Newton step that does not descend is halved this many times, then damped
+    /// (Levenberg-Marquardt) if it still does not. Each try costs a matching of every touch.
+    pub(super) halvings_before_damping: i32,
 }
 
 impl<'t> Workspace<'t> {
@@ -106,9 +130,12 @@ impl<'t> Workspace<'t> {
             weights: Vec::with_capacity(count),
             fixed: touches.iter().map(|touch| touch.point).collect(),
             incoherent: 0,
+            saved: SavedMatching::default(),
             hints: vec![None; count],
             abandon_above: None,
             polish: true,
+            guided_slack: 1.0,
+            halvings_before_damping: HALVINGS_BEFORE_DAMPING,
         })
     }
 
@@ -139,9 +166,9 @@ impl<'t> Workspace<'t> {
             && self.options.coherence
             && touch.face.is_none()
             && let Some(facing) = &facing
-            && let Some(found) = self
-                .target
-                .guided_contact(&in_part, facing, guide_cone, hint)
+            && let Some(found) =
+                self.target
+                    .guided_contact(&in_part, facing, guide_cone, hint, self.guided_slack)
         {
             found
         } else {
@@ -178,6 +205,20 @@ impl<'t> Workspace<'t> {
             self.normals.push(pose.rotation * contact.normal);
             self.weights.push(1.0);
         }
+    }
+
+    fn save_matching(&mut self) {
+        self.saved.moved.clone_from(&self.moved);
+        self.saved.normals.clone_from(&self.normals);
+        self.saved.weights.clone_from(&self.weights);
+        self.saved.incoherent = self.incoherent;
+    }
+
+    fn restore_matching(&mut self) {
+        self.moved.clone_from(&self.saved.moved);
+        self.normals.clone_from(&self.saved.normals);
+        self.weights.clone_from(&self.saved.weights);
+        self.incoherent = self.saved.incoherent;
     }
 
     /// RMS distance of the touches from the (ball-offset) surface at the current correspondences.
@@ -324,6 +365,7 @@ impl<'t> Workspace<'t> {
             };
             let mut fraction = 1.0;
             let rms_before = rms;
+            self.save_matching();
             let candidate = loop {
                 let candidate = step.scaled(fraction) * pose;
                 self.correspond(&candidate, matching);
@@ -339,12 +381,12 @@ impl<'t> Workspace<'t> {
                     rms = candidate_rms;
                     break candidate;
                 }
-                if !point_to_point && fraction < 0.2 {
+                if !point_to_point && fraction <= 0.5f64.powi(self.halvings_before_damping) {
                     // The Gauss-Newton step overshoots even shortened: it leans on a direction
                     // the touches barely constrain (the spin of a turned part). Damp it towards
                     // gradient descent instead (Levenberg-Marquardt).
                     damping = if damping > 0.0 { damping * 10.0 } else { 1e-3 };
-                    self.correspond(&pose, matching);
+                    self.restore_matching();
                     match self.point_to_plane_step(sliding, damping) {
                         Some(damped) if damping <= MAX_DAMPING => {
                             step = damped;
@@ -360,7 +402,7 @@ impl<'t> Workspace<'t> {
                 }
                 if fraction < 1.0 / 1024.0 {
                     // No descent along the step: the pose is stationary.
-                    self.correspond(&pose, matching);
+                    self.restore_matching();
                     converged = true;
                     break 'outer;
                 }

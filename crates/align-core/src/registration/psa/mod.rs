@@ -184,14 +184,18 @@ pub fn align_touches(
     let started = Instant::now();
     validate(touches, options)?;
     let mut workspace = Workspace::new(target, touches, options)?;
-    let local = workspace.run_local(base_from_part_start);
     let radius_m = target.mesh().radius_m();
     let (mut solutions, starts) = match options.search {
-        Search::Local => (vec![local], 1),
+        Search::Local => (vec![workspace.run_local(base_from_part_start)], 1),
         Search::Global { starts } => {
-            let explored = global::explore(target, touches, options, starts, local.rms_m)?;
+            // The screening does not depend on the local run: the two go side by side.
+            let (local, screened) = rayon::join(
+                || workspace.run_local(base_from_part_start),
+                || global::screen(target, touches, options, starts),
+            );
+            let explored = global::explore(target, screened?, local.rms_m)?;
             let contenders = global::contenders(explored, radius_m, options);
-            let mut solutions = global::polish(&mut workspace, contenders);
+            let mut solutions = global::polish(target, touches, options, contenders)?;
             solutions.push(local);
             (solutions, starts + 1)
         }

@@ -135,17 +135,19 @@ impl<'a> PsaTarget<'a> {
     /// The touch's guided contact: the closest surface point whose face turns towards the probe
     /// (within `cone_rad` of `facing`), so that a touch pushed through the part by a wrong pose
     /// still finds the face it touched, not the back of the wall. `None` when no such surface
-    /// exists. `facing` is unit, in the part frame; `hint` is the touch's previous triangle.
+    /// exists. `facing` is unit, in the part frame; `hint` is the touch's previous triangle;
+    /// `slack` >= 1 allows a contact up to that factor farther than the closest (1: exact).
     pub(super) fn guided_contact(
         &self,
         in_part: &Point3<f64>,
         facing: &Vector3<f64>,
         cone_rad: f64,
         hint: Option<u32>,
+        slack: f64,
     ) -> Option<Contact> {
         let found = self
             .mesh
-            .closest_point_facing(in_part, facing, cone_rad, hint)?;
+            .closest_point_facing(in_part, facing, cone_rad, hint, slack)?;
         Some(Contact {
             point: found.point,
             normal: found.normal,
