@@ -375,3 +375,196 @@ fn an_open_mesh_fitted_from_the_truth_ends_no_worse_than_the_truth() {
         );
     }
 }
+
+/// A diagnosis with its reasons, for failure messages.
+fn describe(diagnosis: &align_core::diagnosis::Diagnosis) -> String {
+    format!(
+        "{} ({}); before {:.1} um (held out {:.1}), after {:.1} um (held out {:.1}); {:?}; alternatives {:?}",
+        diagnosis.verdict.name(),
+        diagnosis.explanation,
+        diagnosis.before.rms_m * 1e6,
+        diagnosis.before.loo_rms_m * 1e6,
+        diagnosis.after.rms_m * 1e6,
+        diagnosis.after.loo_rms_m * 1e6,
+        diagnosis.effect.as_ref().map(|(n, f)| (n, &f.params)),
+        diagnosis
+            .alternatives
+            .iter()
+            .map(|a| (&a.name, &a.reason))
+            .collect::<Vec<_>>()
+    )
+}
+
+/// Regression (independent synthetic sessions, issue 18): gravity sag was missed in one session
+/// of three. A UR5e from UR's published DH table and masses, a hidden compliance on the shoulder
+/// and elbow, 24 touches on a small plate: found, with the held-out error falling, or at worst
+/// tied with the encoder offsets it resembles there (the shoulder's gravity torque changes little
+/// over a plate 0.2 m across), never missed or misnamed.
+#[test]
+fn gravity_sag_of_an_independent_robot_is_found_or_tied_never_missed() {
+    let chain = ur5e();
+    let mesh = fixture_plate().unwrap();
+    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
+    let mut hidden = HiddenEffects::none(6);
+    hidden.compliance_rad_per_nm = vec![0.0, 4e-5, 6e-5, 0.0, 0.0, 0.0];
+    let sigma = 5e-5;
+    let mut found = 0;
+    for seed in [21, 22, 23] {
+        let session = session_on(&chain, &hidden, &mesh, 24, sigma, seed);
+        let start = aligned(&chain, &tool, &mesh, &session);
+        let diagnosis = diagnose(
+            Some(&chain),
+            &tool,
+            &mesh,
+            &samples(&session),
+            &start,
+            sigma,
+        )
+        .unwrap();
+        let report = describe(&diagnosis);
+        println!("seed {seed}: {report}");
+        let (name, fit) = diagnosis.effect.clone().unwrap();
+        assert_eq!(name, "joint_compliance", "seed {seed}: {report}");
+        if diagnosis.verdict == Verdict::Effect {
+            assert!(fit.rms_m < 1.5 * sigma, "seed {seed}: {report}");
+            assert!(
+                diagnosis.after.loo_rms_m < diagnosis.before.loo_rms_m / 2.0,
+                "seed {seed}: {report}"
+            );
+            found += 1;
+        } else {
+            assert_eq!(
+                diagnosis.verdict,
+                Verdict::Ambiguous,
+                "seed {seed}: {report}"
+            );
+            assert!(
+                diagnosis.explanation.contains("joint_compliance"),
+                "{report}"
+            );
+        }
+    }
+    assert!(found >= 2, "found in {found} of 3 sessions");
+}
+
+/// Pairs compete with single effects (issue 18): a TCP error and a part larger than its CAD model
+/// together are named as the pair, and the pair's correction generalises (held-out error).
+#[test]
+fn a_tcp_error_and_a_part_scale_together_are_found_as_a_pair() {
+    let chain = ur5e();
+    let mesh = fixture_plate().unwrap();
+    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
+    let mut hidden = HiddenEffects::none(6);
+    hidden.tcp_error_m = Vector3::new(0.0015, -0.001, 0.0);
+    hidden.part_scale = 1.004;
+    let sigma = 5e-5;
+    let mut found = 0;
+    for seed in [31, 32, 33] {
+        let session = session_on(&chain, &hidden, &mesh, 40, sigma, seed);
+        let start = aligned(&chain, &tool, &mesh, &session);
+        let diagnosis = diagnose(
+            Some(&chain),
+            &tool,
+            &mesh,
+            &samples(&session),
+            &start,
+            sigma,
+        )
+        .unwrap();
+        let report = describe(&diagnosis);
+        println!("seed {seed}: {report}");
+        // Never a single effect named in the pair's place.
+        if diagnosis.verdict == Verdict::Effect {
+            let (name, fit) = diagnosis.effect.clone().unwrap();
+            assert_eq!(name, "tcp_offset+part_scale", "seed {seed}: {report}");
+            let scale = fit.params.iter().find(|p| p.0 == "scale_minus_one");
+            if let Some((_, value, stderr)) = scale {
+                assert!((value - 0.004).abs() <= 3.0 * stderr.max(2e-4), "{report}");
+            }
+            assert!(
+                diagnosis.after.loo_rms_m < diagnosis.before.loo_rms_m / 2.0,
+                "{report}"
+            );
+            found += 1;
+        } else {
+            assert_eq!(
+                diagnosis.verdict,
+                Verdict::Ambiguous,
+                "seed {seed}: {report}"
+            );
+        }
+    }
+    assert!(found >= 2, "the pair found in {found} of 3 sessions");
+}
+
+/// Regression (issue 18): with a TCP error or a kinematic error present, the alignment from a
+/// nominal pose 10-30 mm off ended 3-6 mm rms where the pose-only optimum was 0.2-0.55 mm. The
+/// default (global) alignment must reach the fit the diagnosis's pose-only stage finds.
+#[test]
+fn with_a_tcp_or_kinematic_error_the_alignment_reaches_the_pose_only_optimum() {
+    let chain = ur5e();
+    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
+    let sigma = 5e-5;
+    let mut tcp = HiddenEffects::none(6);
+    tcp.tcp_error_m = Vector3::new(0.002, 0.0, 0.001);
+    let mut kinematic = HiddenEffects::none(6);
+    kinematic.joint_offsets_rad = vec![0.0, 2e-3, -3e-3, 2.5e-3, 0.0, 0.0];
+    for (case, mesh, hidden) in [
+        ("tcp, bracket", thin_wall_bracket().unwrap(), &tcp),
+        ("joints, bracket", thin_wall_bracket().unwrap(), &kinematic),
+        ("tcp, plate", fixture_plate().unwrap(), &tcp),
+    ] {
+        let session = session_on(&chain, hidden, &mesh, 30, sigma, 41);
+        let touches: Vec<Touch> = session
+            .touches
+            .iter()
+            .map(|t| {
+                let tcp = chain.forward(&t.q_reported).unwrap() * tool.flange_from_tcp;
+                let mut touch = Touch::new(t.touch.id.clone(), tcp.translation.vector.into());
+                touch.approach = Some(tcp.rotation * Vector3::z());
+                touch
+            })
+            .collect();
+        // The nominal pose: the truth 20 mm and 2 degrees off.
+        let nominal = Isometry3::new(
+            Vector3::new(0.012, -0.016, 0.0),
+            Vector3::new(0.0, 0.0, 2f64.to_radians()),
+        ) * session.base_from_part_truth;
+        let result = align_touches(
+            &PsaTarget::new(&mesh),
+            &touches,
+            &nominal,
+            &PsaOptions {
+                tip_radius_m: tool.tip_radius_m,
+                ..PsaOptions::default()
+            },
+        )
+        .unwrap();
+        let diagnosis = diagnose(
+            Some(&chain),
+            &tool,
+            &mesh,
+            &samples(&session),
+            &session.base_from_part_truth,
+            sigma,
+        )
+        .unwrap();
+        let optimum_m = diagnosis.before.rms_m;
+        assert!(
+            result.alignment.rms_m <= optimum_m * 1.01 + 1e-6,
+            "{case}: rms {:.3} mm where the pose alone reaches {:.3} mm",
+            result.alignment.rms_m * 1e3,
+            optimum_m * 1e3
+        );
+        let apart = pose_distance(
+            &result.alignment.base_from_part,
+            &diagnosis.before.base_from_part,
+            mesh.radius_m(),
+        );
+        assert!(
+            apart < 1e-3,
+            "{case}: {:.2} mm from the optimum",
+            apart * 1e3
+        );
+    }
+}

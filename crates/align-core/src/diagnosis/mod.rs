@@ -154,6 +154,34 @@ const PAIR_MARGIN_BIC: f64 = 10.0;
 /// Single effects whose fits rank best are paired with each other, this many at most.
 const PAIRED_SINGLES: usize = 4;
 
+/// The pairs to fit, from the single effects that could be fitted (best BIC first): the best
+/// few with each other, and the best with every other effect, fitted alone or not. The second is
+/// forward selection's next step: an effect that explains nothing alone, because the first one
+/// dominates the residual, can still be what remains once the first is fitted (a TCP error hides
+/// a part scale, whose fit alone ranked last or was not even seen).
+fn pairs_to_try(fitted_singles: &[(Effect, f64)]) -> Vec<[Effect; 2]> {
+    let mut pairs: Vec<[Effect; 2]> = Vec::new();
+    let mut add = |first: Effect, second: Effect| {
+        let mut pair = [first, second];
+        pair.sort();
+        if first != second && !pairs.contains(&pair) {
+            pairs.push(pair);
+        }
+    };
+    let best = fitted_singles.iter().take(PAIRED_SINGLES);
+    for (i, (first, _)) in best.clone().enumerate() {
+        for (second, _) in best.clone().skip(i + 1) {
+            add(*first, *second);
+        }
+    }
+    if let Some((first, _)) = fitted_singles.first() {
+        for second in Effect::ALL {
+            add(*first, second);
+        }
+    }
+    pairs
+}
+
 /// Upper 99% point of chi-square with `dof` degrees of freedom (Wilson-Hilferty).
 fn chi_square_99(dof: f64) -> f64 {
     let z = 2.326_347_874;
@@ -315,44 +343,39 @@ fn candidates(
         }
     }
     fitted_singles.sort_by(|a, b| a.1.total_cmp(&b.1));
-    fitted_singles.truncate(PAIRED_SINGLES);
-    for (i, (first, _)) in fitted_singles.iter().enumerate() {
-        for (second, _) in &fitted_singles[i + 1..] {
-            let mut pair = [*first, *second];
-            pair.sort();
-            match selection::assess(problem, &pair, pose_theta, sigma, pose_only_bic) {
-                Assessment::Accepted(candidate) => {
-                    // Two effects are a stronger claim than one: a pair must beat every single
-                    // effect clearly, or the simpler explanation stands.
-                    let (single, single_bic) = accepted
-                        .iter()
-                        .filter(|c| c.effects.len() == 1)
-                        .map(|c| (c.name(), c.fit.bic))
-                        .chain(std::iter::once((
-                            "the pose alone".to_owned(),
-                            pose_only_bic,
-                        )))
-                        .min_by(|a, b| a.1.total_cmp(&b.1))
-                        .unwrap_or_else(|| ("the pose alone".to_owned(), pose_only_bic));
-                    if candidate.fit.bic > single_bic - PAIR_MARGIN_BIC {
-                        if candidate.fit.bic < pair_rival.1 {
-                            pair_rival = (candidate.name(), candidate.fit.bic);
-                        }
-                        alternatives.push(Alternative {
-                            name: candidate.name(),
-                            reason: format!(
-                                "BIC {:.1} does not beat {single}'s {single_bic:.1} by {PAIR_MARGIN_BIC}: the simpler explanation stands",
-                                candidate.fit.bic
-                            ),
-                            fit: Some(candidate.fit),
-                        });
-                    } else {
-                        accepted.push(candidate);
+    for pair in pairs_to_try(&fitted_singles) {
+        match selection::assess(problem, &pair, pose_theta, sigma, pose_only_bic) {
+            Assessment::Accepted(candidate) => {
+                // Two effects are a stronger claim than one: a pair must beat every single
+                // effect clearly, or the simpler explanation stands.
+                let (single, single_bic) = accepted
+                    .iter()
+                    .filter(|c| c.effects.len() == 1)
+                    .map(|c| (c.name(), c.fit.bic))
+                    .chain(std::iter::once((
+                        "the pose alone".to_owned(),
+                        pose_only_bic,
+                    )))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .unwrap_or_else(|| ("the pose alone".to_owned(), pose_only_bic));
+                if candidate.fit.bic > single_bic - PAIR_MARGIN_BIC {
+                    if candidate.fit.bic < pair_rival.1 {
+                        pair_rival = (candidate.name(), candidate.fit.bic);
                     }
+                    alternatives.push(Alternative {
+                        name: candidate.name(),
+                        reason: format!(
+                            "BIC {:.1} does not beat {single}'s {single_bic:.1} by {PAIR_MARGIN_BIC}: the simpler explanation stands",
+                            candidate.fit.bic
+                        ),
+                        fit: Some(candidate.fit),
+                    });
+                } else {
+                    accepted.push(candidate);
                 }
-                Assessment::Absorbed(candidate, reason) => absorbed.push((candidate, reason)),
-                Assessment::Rejected(alternative) => alternatives.push(alternative),
             }
+            Assessment::Absorbed(candidate, reason) => absorbed.push((candidate, reason)),
+            Assessment::Rejected(alternative) => alternatives.push(alternative),
         }
     }
     accepted.sort_by(|a, b| a.fit.bic.total_cmp(&b.fit.bic));
@@ -466,11 +489,23 @@ fn verdict(
             false,
         )
     } else if absorbed_best_bic < best.fit.bic + AMBIGUITY_BIC {
+        // Name every candidate tied with the best too: the absorbed one is not the only rival.
+        let explains = if rivals.is_empty() {
+            format!("{} explains the residual", best.name())
+        } else {
+            let tied: Vec<String> = std::iter::once(&best)
+                .chain(rivals.iter().copied())
+                .map(Candidate::name)
+                .collect();
+            format!(
+                "{} explain the residual about equally well (BIC within {AMBIGUITY_BIC})",
+                tied.join(", ")
+            )
+        };
         (
             Verdict::Ambiguous,
             format!(
-                "{} explains the residual, but an effect the part pose absorbs fits as well (BIC {absorbed_best_bic:.1} against {:.1}; see the alternatives): touches in more varied configurations would separate them",
-                best.name(),
+                "{explains}, but an effect the part pose absorbs fits as well (BIC {absorbed_best_bic:.1} against {:.1}; see the alternatives): touches in more varied configurations would separate them",
                 best.fit.bic
             ),
             false,
