@@ -5,8 +5,8 @@
 //! vector (or the flange pose the controller reported), the tool's TCP, the ball radius. The
 //! pose-only fit leaves residuals r_i; with the declared touch noise sigma, RSS / sigma^2 follows
 //! a chi-square law with N - 6 degrees of freedom when nothing is missing. If the test rejects
-//! that (99%), each candidate effect, a small parameterised change of the model, and each pair of
-//! the best-fitting effects, is fitted together with the part pose by Levenberg-Marquardt on the
+//! that (99%), each candidate effect, a small parameterised change of the model, and pairs of
+//! them, is fitted together with the part pose by Levenberg-Marquardt on the
 //! re-projected signed distances; candidates are ranked by BIC (with the declared noise: RSS /
 //! sigma^2 + k ln N) and each reports its leave-one-out RMS.
 //!
@@ -25,10 +25,11 @@
 //!
 //! Which parameters a candidate fits is decided by the touches (see `selection`): those whose
 //! signature at a typical size stays visible beside the pose and the others, then backward
-//! elimination by BIC. A joint-1 offset is a part yaw and drops out; offsets on a UR's three
-//! parallel joints stay together when the data need them. A pair of effects competes with the
-//! single effects on the same terms, but must beat the best single effect and the pose alone by
-//! 10 in BIC.
+//! elimination by BIC, then forward steps that admit a left-out parameter lowering the BIC by 6.
+//! A joint-1 offset is a part yaw and drops out; offsets on a UR's three parallel joints stay
+//! together when the data need them. Pairs (the best single effects with each other, the best
+//! with every other effect) compete with the single effects on the same terms, but must beat the
+//! best single effect and the pose alone by 10 in BIC.
 //! Candidates within 6 of the best BIC (a likelihood ratio of 20) make the verdict `ambiguous`,
 //! listing them all and the touches that would separate them; the pose is then left as the
 //! pose-only fit has it. Under `no_effect`, the alternatives list the effects these touches
