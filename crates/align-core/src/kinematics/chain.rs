@@ -38,11 +38,11 @@ pub(super) struct Segment {
 /// Forward kinematics, Jacobian and limits of the chain `base_link -> tip_link`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Chain {
-    base_link: String,
-    tip_link: String,
+    pub(super) base_link: String,
+    pub(super) tip_link: String,
     pub(super) base_from_first: Isometry3<f64>,
     pub(super) segments: Vec<Segment>,
-    joints: Vec<ChainJoint>,
+    pub(super) joints: Vec<ChainJoint>,
 }
 
 enum Step {

@@ -89,4 +89,6 @@ pub enum KinematicsError {
         joint: String,
         value: f64,
     },
+    #[error("{0}")]
+    Dh(String),
 }

@@ -8,6 +8,7 @@
 //! moved by the joint value (rotation about the axis, or translation along it).
 
 mod chain;
+mod dh;
 mod error;
 mod gravity;
 mod ik;
@@ -15,6 +16,7 @@ mod mesh_uri;
 mod model;
 
 pub use chain::{Chain, ChainJoint};
+pub use dh::DhTable;
 pub use error::{KinematicsError, ModelError};
 pub use gravity::{PointMass, STANDARD_GRAVITY_M_S2};
 pub use ik::{IkError, IkOptions, IkSolution};
