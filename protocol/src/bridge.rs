@@ -179,6 +179,10 @@ pub struct StatusBody {
     /// Datagrams dropped as not from the controller or not its messages (FRI).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rejected_datagrams: Option<u64>,
+    /// The calibrated DH table the controller reported on its latest connection (UR primary
+    /// interface); absent when it sent none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<crate::calibration::ControllerKinematics>,
 }
 
 pub type Status = Envelope<StatusBody>;

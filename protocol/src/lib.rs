@@ -12,6 +12,7 @@
 //! - [`reports`]: the alignment and diagnosis documents the service replies and `ips` prints.
 //! - [`session`], [`journal`]: the session file (6.3) and the service's journal lines.
 //! - [`pose`]: the one pose type of all of them.
+//! - [`calibration`]: a UR controller's calibrated DH table and the calibration file.
 //!
 //! Senders validate before serialising: [`to_json`] refuses NaN or infinite numbers, which JSON
 //! cannot carry and which would poison a twin downstream. Receivers parse with
@@ -19,6 +20,7 @@
 //! objects and name what is wrong.
 
 pub mod bridge;
+pub mod calibration;
 pub mod envelope;
 pub mod journal;
 pub mod pose;

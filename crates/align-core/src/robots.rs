@@ -2,7 +2,7 @@
 //! nominal parameters by `robots/generate.py`, which cites every source). They are compiled in,
 //! so every binary can use them without locating files.
 
-use crate::kinematics::{Chain, ModelError, PackageMap, RobotModel};
+use crate::kinematics::{Chain, DhTable, ModelError, PackageMap, RobotModel};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ShippedRobot {
@@ -75,6 +75,35 @@ impl ShippedRobot {
     pub fn chain(self) -> Result<Chain, ModelError> {
         self.model()?.chain(self.base_link(), self.flange_link())
     }
+
+    /// The nominal standard DH table the URDF was generated from (UR's published parameters,
+    /// as in robots/generate.py): what a UR controller's calibration is a delta to. `None` for
+    /// robots that do not publish one.
+    pub fn nominal_dh(self) -> Option<DhTable> {
+        use std::f64::consts::FRAC_PI_2;
+        let alpha = vec![FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
+        let (a, d) = match self {
+            ShippedRobot::Ur10 => (
+                vec![0.0, -0.612, -0.5723, 0.0, 0.0, 0.0],
+                vec![0.1273, 0.0, 0.0, 0.163941, 0.1157, 0.0922],
+            ),
+            ShippedRobot::Ur10e => (
+                vec![0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0],
+                vec![0.1807, 0.0, 0.0, 0.17415, 0.11985, 0.11655],
+            ),
+            ShippedRobot::Iiwa14 => return None,
+        };
+        DhTable::new(vec![0.0; 6], a, d, alpha).ok()
+    }
+
+    /// The shipped robot whose nominal DH table `chain` is (its base and flange frames and
+    /// geometry), if any: the table a controller's calibration is a delta to.
+    pub fn matching_dh(chain: &Chain) -> Option<(ShippedRobot, DhTable)> {
+        Self::ALL.into_iter().find_map(|robot| {
+            let table = robot.nominal_dh()?;
+            chain.with_dh(&table, &table).ok().map(|_| (robot, table))
+        })
+    }
 }
 
 #[cfg(test)]
@@ -102,5 +131,15 @@ mod tests {
                 || !link.collisions.is_empty()));
             assert_eq!(ShippedRobot::from_name(robot.name()), Some(robot));
         }
+    }
+
+    #[test]
+    fn each_ur_is_its_nominal_dh_table_and_only_that_one() {
+        for robot in [ShippedRobot::Ur10, ShippedRobot::Ur10e] {
+            let chain = robot.chain().unwrap();
+            let (found, _) = ShippedRobot::matching_dh(&chain).unwrap();
+            assert_eq!(found, robot);
+        }
+        assert!(ShippedRobot::matching_dh(&ShippedRobot::Iiwa14.chain().unwrap()).is_none());
     }
 }

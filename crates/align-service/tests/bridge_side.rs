@@ -50,6 +50,7 @@ fn stand_in_bridge(
                         session_state: None,
                         connection_quality: None,
                         rejected_datagrams: None,
+                        kinematics: None,
                     },
                 )),
                 _ => protocol::to_json(&protocol::ack_ok(side)),

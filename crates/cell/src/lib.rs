@@ -285,6 +285,16 @@ impl Cell {
     /// bridge connects to it; an iiwa controller sends FRI to the bridge, so the bridge listens
     /// first. The binaries are looked for next to the running executable.
     pub fn start(robot: ShippedRobot) -> Result<Self, CellError> {
+        Self::start_calibrated(robot, None)
+    }
+
+    /// [`Cell::start`] with a UR arm whose true kinematics are its nominal DH table plus the
+    /// deltas in the `calibration` file (`sim-robot --calibration`): its primary interface
+    /// reports the calibrated table, and the bridge reads it.
+    pub fn start_calibrated(
+        robot: ShippedRobot,
+        calibration: Option<&Path>,
+    ) -> Result<Self, CellError> {
         let sim_program = sibling_binary("sim-robot")?;
         let bridge_program = sibling_binary("robot-bridge")?;
         let zmq_endpoints = ["--rep", "tcp://127.0.0.1:*", "--pub", "tcp://127.0.0.1:*"];
@@ -315,22 +325,25 @@ impl Cell {
             )?;
             return Ok(Self { sim, bridge });
         }
-        let sim = spawn(
-            "sim-robot",
-            &sim_program,
-            &owned(&[
-                "--robot",
-                robot.name(),
-                "--rtde-host",
-                "127.0.0.1",
-                "--rtde-port",
-                "0",
-                "--control",
-                "tcp://127.0.0.1:*",
-            ]),
-            READY_WITHIN,
-        )?;
+        let mut sim_args = owned(&[
+            "--robot",
+            robot.name(),
+            "--rtde-host",
+            "127.0.0.1",
+            "--rtde-port",
+            "0",
+            "--primary-port",
+            "0",
+            "--control",
+            "tcp://127.0.0.1:*",
+        ]);
+        if let Some(calibration) = calibration {
+            sim_args.push("--calibration".to_owned());
+            sim_args.push(calibration.display().to_string());
+        }
+        let sim = spawn("sim-robot", &sim_program, &sim_args, READY_WITHIN)?;
         let rtde_port = sim.port("rtde")?;
+        let primary_port = sim.port("primary")?;
         let mut bridge_args = owned(&[
             "--backend",
             "ur",
@@ -338,6 +351,8 @@ impl Cell {
             "127.0.0.1",
             "--rtde-port",
             &rtde_port,
+            "--primary-port",
+            &primary_port,
         ]);
         bridge_args.extend(owned(&zmq_endpoints));
         let bridge = spawn("robot-bridge", &bridge_program, &bridge_args, READY_WITHIN)?;

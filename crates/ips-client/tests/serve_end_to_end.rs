@@ -70,6 +70,8 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
     let sim = sim_robot::start(&sim_robot::Config {
         robot: ShippedRobot::Ur10,
         rtde_listen: "127.0.0.1:0".to_owned(),
+        primary_listen: None,
+        calibration: None,
         control: "tcp://127.0.0.1:*".to_owned(),
         fri: sim_robot::FriSettings::default(),
     })
@@ -79,6 +81,7 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         backend: robot_bridge::BackendConfig::Ur(robot_bridge::backend::ur::UrConfig {
             robot_host: "127.0.0.1".to_owned(),
             rtde_port: port,
+            primary_port: None,
         }),
         rep: "tcp://127.0.0.1:*".to_owned(),
         publish: "tcp://127.0.0.1:*".to_owned(),
@@ -307,6 +310,8 @@ fn a_bridge_restart_mid_session_is_recovered() {
     let sim = sim_robot::start(&sim_robot::Config {
         robot: ShippedRobot::Ur10,
         rtde_listen: "127.0.0.1:0".to_owned(),
+        primary_listen: None,
+        calibration: None,
         control: "tcp://127.0.0.1:*".to_owned(),
         fri: sim_robot::FriSettings::default(),
     })
@@ -316,6 +321,7 @@ fn a_bridge_restart_mid_session_is_recovered() {
         backend: robot_bridge::BackendConfig::Ur(robot_bridge::backend::ur::UrConfig {
             robot_host: "127.0.0.1".to_owned(),
             rtde_port: port,
+            primary_port: None,
         }),
         rep: rep.to_owned(),
         publish: publish.to_owned(),

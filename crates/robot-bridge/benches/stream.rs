@@ -76,6 +76,8 @@ fn main() {
         let sim = sim_robot::start(&sim_robot::Config {
             robot: ShippedRobot::Ur10e,
             rtde_listen: "127.0.0.1:0".to_owned(),
+            primary_listen: None,
+            calibration: None,
             control: "tcp://127.0.0.1:*".to_owned(),
             fri: sim_robot::FriSettings::default(),
         })
@@ -88,6 +90,7 @@ fn main() {
             "127.0.0.1",
             "--rtde-port",
             &port,
+            "--no-calibration",
         ]);
         measure(
             &bridge,
@@ -110,6 +113,8 @@ fn main() {
         let sim = sim_robot::start(&sim_robot::Config {
             robot: ShippedRobot::Iiwa14,
             rtde_listen: String::new(),
+            primary_listen: None,
+            calibration: None,
             control: "tcp://127.0.0.1:*".to_owned(),
             fri: sim_robot::FriSettings {
                 target: format!("127.0.0.1:{port}"),

@@ -52,6 +52,8 @@ pub(crate) struct ControllerRecord {
     pub(crate) counts_controller_seq: bool,
     pub(crate) controller_samples_missed: u64,
     pub(crate) rejected_datagrams: Option<u64>,
+    /// The calibrated DH table of the latest connection that reported one.
+    pub(crate) kinematics: Option<protocol::calibration::ControllerKinematics>,
 }
 
 impl ControllerRecord {
@@ -132,6 +134,13 @@ pub(crate) fn backend_loop(
             Event::Connected { description } => {
                 tracing::info!(%description, "controller connected");
                 controller.on_connected();
+            }
+            Event::Kinematics(kinematics) => {
+                tracing::info!(
+                    hash = kinematics.hash.as_deref().unwrap_or("-"),
+                    "controller kinematics read"
+                );
+                controller.kinematics = Some(kinematics);
             }
             Event::Lost { reason } => {
                 tracing::warn!(%reason, "controller lost");

@@ -105,6 +105,7 @@ fn answer(request: &[u8], shared: &Shared, identity: Identity) -> String {
                     .and_then(|link| link.quality)
                     .map(str::to_owned),
                 rejected_datagrams: controller.rejected_datagrams,
+                kinematics: controller.kinematics.clone(),
             };
             protocol::to_json(&protocol::status(robot_side, body)).unwrap_or_default()
         }

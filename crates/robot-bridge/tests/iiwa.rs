@@ -52,6 +52,8 @@ impl Simulator {
         let handle = sim_robot::start(&sim_robot::Config {
             robot: ShippedRobot::Iiwa14,
             rtde_listen: String::new(),
+            primary_listen: None,
+            calibration: None,
             control: "tcp://127.0.0.1:*".to_owned(),
             fri: FriSettings {
                 target: target.to_string(),

@@ -33,9 +33,19 @@ struct Simulator {
 
 impl Simulator {
     fn start(robot: ShippedRobot, rtde_listen: String) -> Self {
+        Self::start_calibrated(robot, rtde_listen, None)
+    }
+
+    fn start_calibrated(
+        robot: ShippedRobot,
+        rtde_listen: String,
+        calibration: Option<align_core::kinematics::DhTable>,
+    ) -> Self {
         let handle = sim_robot::start(&sim_robot::Config {
             robot,
             rtde_listen,
+            primary_listen: Some("127.0.0.1:0".to_owned()),
+            calibration,
             control: "tcp://127.0.0.1:*".to_owned(),
             fri: sim_robot::FriSettings::default(),
         })
@@ -70,12 +80,21 @@ impl Simulator {
 
 impl UrCell {
     fn with_robot(robot: ShippedRobot) -> Self {
-        let sim = Simulator::start(robot, "127.0.0.1:0".to_owned());
+        Self::with_simulator(robot, Simulator::start(robot, "127.0.0.1:0".to_owned()))
+    }
+
+    fn with_simulator(robot: ShippedRobot, sim: Simulator) -> Self {
         let rtde_port = sim.handle.rtde_port().unwrap();
+        let primary_port = sim
+            .handle
+            .primary_address
+            .as_deref()
+            .and_then(|address| address.rsplit(':').next()?.parse().ok());
         let bridge = robot_bridge::start(&Config {
             backend: BackendConfig::Ur(UrConfig {
                 robot_host: "127.0.0.1".to_owned(),
                 rtde_port,
+                primary_port,
             }),
             rep: "tcp://127.0.0.1:*".to_owned(),
             publish: "tcp://127.0.0.1:*".to_owned(),
@@ -180,4 +199,131 @@ fn ur10_streams_at_125_hz_and_ur10e_at_500_hz() {
         (0.0019..0.004).contains(&e_series_period_s),
         "e-Series mean period {e_series_period_s} s"
     );
+}
+
+/// A real calibration: set C of the calibration tests of Universal Robots' ROS drivers (a UR10e;
+/// d offsets of 439 and -446 m on the parallel joints cancel).
+#[allow(clippy::excessive_precision)] // As published.
+fn calibration_c() -> align_core::kinematics::DhTable {
+    align_core::kinematics::DhTable::new(
+        vec![
+            -2.41478068943590252e-07,
+            1.60233952386694556,
+            -1.68607190752171299,
+            0.0837331147700118711,
+            -1.01260355871157781e-07,
+            3.91986209186123702e-08,
+        ],
+        vec![
+            2.12234865571205891e-05,
+            0.632017132627700651,
+            0.00229833638891230319,
+            -4.61409023720933908e-05,
+            -6.39280053471801522e-05,
+            0.0,
+        ],
+        vec![
+            -0.000160188285741325043,
+            439.140974079900957,
+            -446.027059806332147,
+            6.88618689642360149,
+            -3.86588496858186748e-05,
+            -0.00087908274257374186,
+        ],
+        vec![
+            -0.000650246557584166496,
+            0.00139416666825590402,
+            0.00693818880325995126,
+            -0.000811641562390219562,
+            0.000411120504570705592,
+            0.0,
+        ],
+    )
+    .unwrap()
+}
+
+#[test]
+fn status_carries_the_calibration_the_controller_reports_and_the_tcp_follows_it() {
+    let robot = ShippedRobot::Ur10e;
+    let delta = calibration_c();
+    let sim = Simulator::start_calibrated(robot, "127.0.0.1:0".to_owned(), Some(delta.clone()));
+    let cell = UrCell::with_simulator(robot, sim);
+    let client = Client::new(cell.bridge(), "ros");
+    let status = client.wait_status(std::time::Duration::from_secs(10), |status| {
+        status["kinematics"].is_object()
+    });
+    let kinematics = &status["kinematics"];
+    let calibrated = robot.nominal_dh().unwrap().plus(&delta).unwrap();
+    for (key, row) in [
+        ("dh_theta", &calibrated.theta),
+        ("dh_a", &calibrated.a),
+        ("dh_d", &calibrated.d),
+        ("dh_alpha", &calibrated.alpha),
+    ] {
+        let reported: Vec<f64> = serde_json::from_value(kinematics[key].clone()).unwrap();
+        assert_eq!(&reported, row, "{key}");
+    }
+    assert!(
+        kinematics["hash"].as_str().unwrap().starts_with("calib_"),
+        "{kinematics}"
+    );
+    // The simulated controller moves with the calibrated kinematics: its TCP pose (RTDE
+    // actual_TCP_pose) is the calibrated table's flange, millimetres from the nominal one.
+    let q = [0.1, -1.4, 1.5, -1.6, -1.5, 0.2];
+    let hold = json!({"command": "motion", "motion": {"kind": "hold", "q": q}});
+    assert_eq!(cell.sim().send(hold)["ok"], true);
+    let calibrated_flange = calibrated.forward(&q).unwrap().translation.vector;
+    let nominal_flange = robot
+        .nominal_dh()
+        .unwrap()
+        .forward(&q)
+        .unwrap()
+        .translation
+        .vector;
+    assert!((calibrated_flange - nominal_flange).norm() > 5e-4);
+    let truth = cell.sim().send(json!({"command": "truth"}));
+    let reported: Vec<f64> = serde_json::from_value(truth["reported_q"].clone()).unwrap();
+    let chain = robot
+        .chain()
+        .unwrap()
+        .with_dh(&robot.nominal_dh().unwrap(), &calibrated)
+        .unwrap();
+    let from_chain = chain.forward(&reported).unwrap().translation.vector;
+    assert!((from_chain - calibrated_flange).norm() < 1e-9);
+    cell.stop();
+}
+
+#[test]
+fn a_controller_without_a_primary_interface_streams_on_without_calibration() {
+    // The default cell's bridge reads the simulator's primary interface; this one points the
+    // bridge at a port where nothing listens.
+    let robot = ShippedRobot::Ur10;
+    let sim = Simulator::start(robot, "127.0.0.1:0".to_owned());
+    let rtde_port = sim.handle.rtde_port().unwrap();
+    let unused = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let closed_port = unused.local_addr().unwrap().port();
+    drop(unused);
+    let bridge = robot_bridge::start(&Config {
+        backend: BackendConfig::Ur(UrConfig {
+            robot_host: "127.0.0.1".to_owned(),
+            rtde_port,
+            primary_port: Some(closed_port),
+        }),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        publish: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .unwrap();
+    let cell = UrCell {
+        robot,
+        rtde_port,
+        sim: Some(sim),
+        bridge,
+    };
+    let client = Client::new(cell.bridge(), "ros");
+    let status = client.wait_connected();
+    assert!(status.get("kinematics").is_none(), "{status}");
+    client.start_mirroring();
+    let sub = client.subscriber();
+    assert_eq!(states(&sub, 5).len(), 5);
+    cell.stop();
 }

@@ -32,6 +32,7 @@ mod control;
 mod effects;
 mod fri_server;
 pub mod motion;
+mod primary_server;
 mod probing;
 mod rtde_server;
 
@@ -41,7 +42,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
-use align_core::kinematics::Chain;
+use align_core::kinematics::{Chain, DhTable};
 use align_core::robots::ShippedRobot;
 pub use control::MAX_REQUEST_BYTES;
 pub use motion::Motion;
@@ -54,6 +55,13 @@ pub struct Config {
     pub robot: ShippedRobot,
     /// RTDE listen address, e.g. "127.0.0.1:30004" ("127.0.0.1:0" picks a free port); UR only.
     pub rtde_listen: String,
+    /// Primary interface listen address (the robot state with the calibrated kinematics), e.g.
+    /// "127.0.0.1:30001"; UR only, `None` serves none.
+    pub primary_listen: Option<String>,
+    /// The robot's calibration: deltas to its nominal DH table (UR only). The simulated arm
+    /// then moves with the calibrated kinematics, reports poses and probes with them, and its
+    /// primary interface reports the calibrated table, as a real factory-calibrated arm does.
+    pub calibration: Option<DhTable>,
     /// Control endpoint, e.g. "tcp://127.0.0.1:*".
     pub control: String,
     /// The FRI link; iiwa only.
@@ -97,6 +105,8 @@ pub enum SimError {
     },
     #[error("robot model: {0}")]
     Model(String),
+    #[error("calibration: {0}")]
+    Calibration(String),
 }
 
 /// One controller sample.
@@ -243,6 +253,8 @@ impl Shared {
 pub struct SimHandle {
     /// The RTDE server's address (UR mode).
     pub rtde_address: Option<String>,
+    /// The primary interface's address (UR mode, when asked for).
+    pub primary_address: Option<String>,
     /// The FRI controller's UDP address and its target (iiwa mode).
     pub fri_address: Option<String>,
     pub fri_target: Option<String>,
@@ -301,10 +313,43 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         // Not an RTDE controller: these only set the RTDE server's figures, which is not run.
         ShippedRobot::Iiwa14 => (1000.0 / f64::from(config.fri.send_period_ms.max(1)), [0; 4]),
     };
-    let chain = config
+    let nominal_chain = config
         .robot
         .chain()
         .map_err(|e| SimError::Model(e.to_string()))?;
+    // The DH table the arm really moves with: nominal, or nominal plus the calibration.
+    let table = match (config.robot.nominal_dh(), &config.calibration) {
+        (Some(nominal), Some(delta)) => Some(
+            nominal
+                .plus(delta)
+                .map_err(|e| SimError::Calibration(e.to_string()))?,
+        ),
+        (Some(nominal), None) => Some(nominal),
+        (None, Some(_)) => {
+            return Err(SimError::Calibration(format!(
+                "{} has no DH table to calibrate (UR robots only)",
+                config.robot.name()
+            )));
+        }
+        (None, None) => None,
+    };
+    let chain = match (config.robot.nominal_dh(), &table, &config.calibration) {
+        (Some(nominal), Some(table), Some(_)) => nominal_chain
+            .with_dh(&nominal, table)
+            .map_err(|e| SimError::Calibration(e.to_string()))?,
+        _ => nominal_chain,
+    };
+    let primary_listener = match (&config.primary_listen, &table) {
+        (Some(address), Some(_)) => {
+            Some(
+                TcpListener::bind(address).map_err(|source| SimError::Listen {
+                    address: address.clone(),
+                    source,
+                })?,
+            )
+        }
+        _ => None,
+    };
     let limits = chain
         .joints()
         .iter()
@@ -348,6 +393,15 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         })?;
     let mut threads = Vec::new();
     let (mut rtde_address, mut fri_address, mut fri_target) = (None, None, None);
+    let mut primary_address = None;
+    if let (Some(listener), Some(table)) = (primary_listener, &table) {
+        primary_address = listener.local_addr().ok().map(|a| a.to_string());
+        let kinematics = kinematics_info(table);
+        let shared = Arc::clone(&shared);
+        threads.push(thread::spawn(move || {
+            primary_server::serve(listener, shared, kinematics)
+        }));
+    }
     match server {
         Server::Rtde(listener) => {
             rtde_address = Some(
@@ -381,6 +435,7 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         - shared.started.elapsed().as_secs_f64();
     Ok(SimHandle {
         rtde_address,
+        primary_address,
         fri_address,
         fri_target,
         control_endpoint,
@@ -388,6 +443,20 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         shared: Arc::new(SharedDebug(shared)),
         threads,
     })
+}
+
+/// The KINEMATICS_INFO a controller with this DH table sends. The checksums and status are what
+/// URSim sends (all bits set, 0): nothing the project reads depends on them.
+fn kinematics_info(table: &DhTable) -> ur_primary::KinematicsInfo {
+    let row = |values: &[f64]| std::array::from_fn(|j| values.get(j).copied().unwrap_or(0.0));
+    ur_primary::KinematicsInfo {
+        checksum: [u32::MAX; 6],
+        dh_theta: row(&table.theta),
+        dh_a: row(&table.a),
+        dh_d: row(&table.d),
+        dh_alpha: row(&table.alpha),
+        calibration_status: 0,
+    }
 }
 
 enum Server {

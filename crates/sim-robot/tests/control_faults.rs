@@ -18,6 +18,8 @@ fn start_simulator() -> sim_robot::SimHandle {
     sim_robot::start(&sim_robot::Config {
         robot: ShippedRobot::Ur10,
         rtde_listen: "127.0.0.1:0".to_owned(),
+        primary_listen: None,
+        calibration: None,
         control: "tcp://127.0.0.1:*".to_owned(),
         fri: sim_robot::FriSettings::default(),
     })

@@ -82,6 +82,8 @@ fn ur_rtde_default_recipe_with_trailing_comma_is_set_up_and_streamed() {
     let sim = sim_robot::start(&sim_robot::Config {
         robot: ShippedRobot::Ur10e,
         rtde_listen: "127.0.0.1:0".to_owned(),
+        primary_listen: None,
+        calibration: None,
         control: "tcp://127.0.0.1:*".to_owned(),
         fri: sim_robot::FriSettings::default(),
     })

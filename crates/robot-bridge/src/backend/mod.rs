@@ -39,9 +39,15 @@ pub struct LinkState {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
     Connecting,
-    Connected { description: String },
+    Connected {
+        description: String,
+    },
+    /// The controller's calibrated kinematics, read on a (re)connection (UR primary interface).
+    Kinematics(protocol::calibration::ControllerKinematics),
     Sample(Sample),
-    Lost { reason: String },
+    Lost {
+        reason: String,
+    },
 }
 
 /// A controller connection. `next_event` blocks at most `timeout`; `None` means nothing new.

@@ -2,7 +2,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, ValueEnum};
 use robot_bridge::backend::iiwa::{DEFAULT_FRI_PORT, IiwaConfig};
-use robot_bridge::backend::ur::{DEFAULT_RTDE_PORT, UrConfig};
+use robot_bridge::backend::ur::{DEFAULT_PRIMARY_PORT, DEFAULT_RTDE_PORT, UrConfig};
 use robot_bridge::{BackendConfig, Config};
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::iterator::Signals;
@@ -52,6 +52,18 @@ struct UrArgs {
         allow_negative_numbers = true,
     )]
     rtde_port: u16,
+    /// Primary interface port of the UR controller, 1-65535: the robot's factory calibration
+    /// (KINEMATICS_INFO) is read there on every connection and reported by `status`.
+    #[arg(
+        long,
+        default_value_t = DEFAULT_PRIMARY_PORT,
+        value_parser = parse_controller_port,
+        allow_negative_numbers = true,
+    )]
+    primary_port: u16,
+    /// Do not read the calibration (poses then rest on the nominal kinematics).
+    #[arg(long)]
+    no_calibration: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -104,6 +116,7 @@ impl Args {
             BackendChoice::Ur => BackendConfig::Ur(UrConfig {
                 robot_host,
                 rtde_port: self.ur.rtde_port,
+                primary_port: (!self.ur.no_calibration).then_some(self.ur.primary_port),
             }),
             BackendChoice::Iiwa => BackendConfig::Iiwa(IiwaConfig {
                 robot_host,

@@ -27,6 +27,20 @@ struct Args {
     /// Address to listen on for RTDE.
     #[arg(long, default_value = "0.0.0.0")]
     rtde_host: String,
+    /// Primary interface port (UR modes): the robot state with the kinematics; 0 picks a free
+    /// port. Served on --rtde-host.
+    #[arg(
+        long,
+        default_value_t = 30001,
+        value_parser = parse_listen_port,
+        allow_negative_numbers = true,
+    )]
+    primary_port: u16,
+    /// The robot's calibration (UR modes): {"dh_delta": {"theta": [6], "a": [6], "d": [6],
+    /// "alpha": [6]}}, rad and m, added to the nominal DH table. The arm then moves, reports
+    /// and probes with the calibrated kinematics, and its primary interface says so.
+    #[arg(long, value_name = "FILE")]
+    calibration: Option<std::path::PathBuf>,
     /// Where the FRI client listens, HOST:PORT (iiwa mode).
     #[arg(long, default_value = "127.0.0.1:30200")]
     fri_target: String,
@@ -117,10 +131,24 @@ fn main() -> ExitCode {
         );
         return ExitCode::from(2);
     };
+    let calibration = match args
+        .calibration
+        .as_deref()
+        .map(read_calibration)
+        .transpose()
+    {
+        Ok(calibration) => calibration,
+        Err(reason) => {
+            eprintln!("sim-robot: {reason}");
+            return ExitCode::from(2);
+        }
+    };
     init_logs();
     let config = sim_robot::Config {
         robot,
         rtde_listen: format!("{}:{}", args.rtde_host, args.rtde_port),
+        primary_listen: Some(format!("{}:{}", args.rtde_host, args.primary_port)),
+        calibration,
         control: args.control,
         fri: sim_robot::FriSettings {
             target: args.fri_target,
@@ -147,7 +175,13 @@ fn main() -> ExitCode {
         &handle.fri_address,
         &handle.fri_target,
     ) {
-        (Some(rtde), _, _) => println!("READY rtde={rtde} control={}", handle.control_endpoint),
+        (Some(rtde), _, _) => match &handle.primary_address {
+            Some(primary) => println!(
+                "READY rtde={rtde} primary={primary} control={}",
+                handle.control_endpoint
+            ),
+            None => println!("READY rtde={rtde} control={}", handle.control_endpoint),
+        },
         (None, Some(fri), Some(target)) => println!(
             "READY fri={fri} fri_target={target} control={}",
             handle.control_endpoint
@@ -162,6 +196,17 @@ fn main() -> ExitCode {
 
 /// Logs to stderr at the levels `RUST_LOG` names (default `info`); stdout carries only the
 /// READY line.
+/// The calibration file's deltas as a DH table, or why not.
+fn read_calibration(path: &std::path::Path) -> Result<align_core::kinematics::DhTable, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|error| format!("cannot read calibration {}: {error}", path.display()))?;
+    let file = protocol::calibration::CalibrationFile::parse(&text)
+        .map_err(|reason| format!("calibration {}: {reason}", path.display()))?;
+    let delta = file.dh_delta;
+    align_core::kinematics::DhTable::new(delta.theta, delta.a, delta.d, delta.alpha)
+        .map_err(|error| format!("calibration {}: {error}", path.display()))
+}
+
 fn init_logs() {
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let logs = tracing_subscriber::fmt().with_env_filter(filter);
