@@ -306,6 +306,10 @@ impl Message for ServiceReply {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StatusReply {
     pub inspections: usize,
+    /// Which kinematics turn joints into touches: the description's nominal ones, or the
+    /// controller's factory calibration (with its hash); absent before the bridge was asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<String>,
     pub mirroring: bool,
     /// Age of the latest joint state, s; null before the first.
     pub sample_age_s: Option<f64>,

@@ -31,6 +31,11 @@ pub struct RobotSection {
     pub tip_link: String,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub package_dirs: BTreeMap<String, String>,
+    /// The controller's calibrated DH table (a UR's factory calibration, as `ips serve` learnt
+    /// it from the bridge): joints become flange poses with it instead of the description's
+    /// geometry. Optional; a saved session keeps it so that offline tools agree with the service.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<crate::calibration::ControllerKinematics>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

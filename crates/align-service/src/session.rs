@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use align_core::geometry::Mesh;
 use align_core::io::read_mesh;
-use align_core::kinematics::{Chain, PackageMap, RobotModel};
+use align_core::kinematics::{Chain, DhTable, PackageMap, RobotModel};
 use align_core::pose::isometry_from_xyz_rpy;
 use align_core::registration::psa::{Face, Touch};
 use align_core::tool::Tool;
@@ -52,6 +52,16 @@ impl LoadedSession {
     }
 
     pub fn resolve(file: SessionFile, folder: &Path) -> Result<Self, BadInput> {
+        Self::resolve_calibrated(file, folder, None)
+    }
+
+    /// [`LoadedSession::resolve`] with the robot's joints turned into flange poses by its
+    /// calibrated kinematics: the controller's DH table replaces the description's geometry.
+    pub fn resolve_calibrated(
+        file: SessionFile,
+        folder: &Path,
+        calibration: Option<&Calibration>,
+    ) -> Result<Self, BadInput> {
         let relative = |p: &str| -> PathBuf { folder.join(p) };
         let chain = match &file.robot {
             Some(robot) => {
@@ -68,6 +78,25 @@ impl LoadedSession {
                 )
             }
             None => None,
+        };
+        // The file's own calibration, unless the caller brings a newer one.
+        let from_file = match (
+            &chain,
+            file.robot.as_ref().and_then(|r| r.kinematics.as_ref()),
+        ) {
+            (Some(chain), Some(kinematics)) => Some(
+                Calibration::for_chain(kinematics, chain)
+                    .map_err(|reason| BadInput(format!("robot.kinematics: {reason}")))?,
+            ),
+            _ => None,
+        };
+        let chain = match (chain, calibration.or(from_file.as_ref())) {
+            (Some(chain), Some(calibration)) => Some(
+                chain
+                    .with_dh(&calibration.nominal, &calibration.calibrated)
+                    .map_err(BadInput::new)?,
+            ),
+            (chain, _) => chain,
         };
         let tool = Tool::new(
             pose(&file.tool.tcp, "tool.tcp")?,
@@ -119,6 +148,83 @@ impl LoadedSession {
             base_from_part_nominal,
             touches,
         })
+    }
+}
+
+/// A robot's factory calibration as its controller reports it: the calibrated DH table, the
+/// nominal one it is a delta to, and the hash that names it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    pub nominal: DhTable,
+    pub calibrated: DhTable,
+    pub hash: Option<String>,
+}
+
+impl Calibration {
+    /// The controller's `kinematics` for the robot `chain` describes, or why it does not apply
+    /// (the table is malformed, or the chain is not a robot whose nominal table is known).
+    pub fn for_chain(
+        kinematics: &protocol::calibration::ControllerKinematics,
+        chain: &Chain,
+    ) -> Result<Self, String> {
+        kinematics.check()?;
+        let calibrated = DhTable::new(
+            kinematics.dh_theta.clone(),
+            kinematics.dh_a.clone(),
+            kinematics.dh_d.clone(),
+            kinematics.dh_alpha.clone(),
+        )
+        .map_err(|error| error.to_string())?;
+        let (_, nominal) = align_core::robots::ShippedRobot::matching_dh(chain).ok_or_else(|| {
+            format!(
+                "the session's chain {} -> {} is not a robot whose nominal DH table is known (UR10, UR10e)",
+                chain.base_link(),
+                chain.tip_link()
+            )
+        })?;
+        // A calibration moves the flange millimetres; a table metres off is another robot.
+        let probe = [0.3, -1.2, 1.4, -1.5, -1.4, 0.5];
+        let apart = (nominal
+            .forward(&probe)
+            .map_err(|e| e.to_string())?
+            .translation
+            .vector
+            - calibrated
+                .forward(&probe)
+                .map_err(|e| e.to_string())?
+                .translation
+                .vector)
+            .norm();
+        if apart > 0.05 {
+            return Err(format!(
+                "the controller's kinematics put the flange {:.0} mm from the description's: another robot model than the session's",
+                apart * 1e3
+            ));
+        }
+        Ok(Self {
+            nominal,
+            calibrated,
+            hash: kinematics.hash.clone(),
+        })
+    }
+
+    /// As a session file's `robot.kinematics`.
+    pub fn to_kinematics(&self) -> protocol::calibration::ControllerKinematics {
+        protocol::calibration::ControllerKinematics {
+            dh_theta: self.calibrated.theta.clone(),
+            dh_a: self.calibrated.a.clone(),
+            dh_d: self.calibrated.d.clone(),
+            dh_alpha: self.calibrated.alpha.clone(),
+            hash: self.hash.clone(),
+        }
+    }
+
+    /// How the status reply names it.
+    pub fn describe(&self) -> String {
+        format!(
+            "calibrated ({}, from the controller)",
+            self.hash.as_deref().unwrap_or("no hash")
+        )
     }
 }
 

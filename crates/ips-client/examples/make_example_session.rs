@@ -62,6 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             base_link: "base_link".to_owned(),
             tip_link: "tool0".to_owned(),
             package_dirs: Default::default(),
+            kinematics: None,
         }),
         tool: ToolSection {
             tcp: pose(&tcp),

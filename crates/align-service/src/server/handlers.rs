@@ -27,7 +27,7 @@ use super::samples::{JointSample, Samples};
 use super::{Config, socket};
 use crate::BadInput;
 use crate::jobs::{align, cloud, diagnose};
-use crate::session::{LoadedSession, check_inspection, parse_session_file};
+use crate::session::{Calibration, LoadedSession, check_inspection, parse_session_file};
 
 /// Why a request was refused; its text is the reply's `reason`.
 #[derive(Debug, thiserror::Error)]
@@ -68,6 +68,12 @@ pub(crate) struct Service {
     pub files: FileAccess,
     pub chain: Chain,
     pub tool: Tool,
+    /// The session robot's chain as its description has it (`chain` may be calibrated).
+    pub nominal_chain: Chain,
+    /// The controller's factory calibration, learnt from the bridge on `start`.
+    pub calibration: Option<Calibration>,
+    /// Which kinematics are in use, for `status`; `None` before the bridge was asked.
+    pub kinematics_note: Option<String>,
 }
 
 fn reply<T: Serialize>(result: Handled<T>) -> ServiceReply {
@@ -174,6 +180,10 @@ impl Service {
     fn session_file(&self) -> SessionFile {
         let mut file = self.template.clone();
         file.inspections = self.inspections.clone();
+        // The controller's calibration, when one is in use, travels with the touches it made.
+        if let (Some(robot), Some(calibration)) = (&mut file.robot, &self.calibration) {
+            robot.kinematics = Some(calibration.to_kinematics());
+        }
         file
     }
 
@@ -184,6 +194,7 @@ impl Service {
             .map(|s| s.received.elapsed().as_secs_f64());
         StatusReply {
             inspections: self.inspections.len(),
+            kinematics: self.kinematics_note.clone(),
             mirroring: self.mirroring,
             sample_age_s: age,
             stale: age.is_none_or(|a| a > self.config.max_sample_age_s),
@@ -197,7 +208,55 @@ impl Service {
             Command::Stop
         })?;
         self.mirroring = mirroring;
+        if mirroring {
+            self.learn_kinematics();
+        }
         Ok(MirroringReply { mirroring })
+    }
+
+    /// Asks the bridge which kinematics its controller reported (a UR's factory calibration)
+    /// and, when they fit the session's robot, turns joints into touches with them from now on.
+    /// Anything else keeps the nominal kinematics, with the reason in the log and `status`.
+    fn learn_kinematics(&mut self) {
+        let side = self.bridge_side.unwrap_or(RobotSide::Ros);
+        let status: Result<protocol::Status, String> = self.instruct(side, Command::Status);
+        let (calibration, note) = match status.map(|status| status.body.kinematics) {
+            Ok(Some(kinematics)) => {
+                match Calibration::for_chain(&kinematics, &self.nominal_chain) {
+                    Ok(calibration) => {
+                        let note = calibration.describe();
+                        (Some(calibration), note)
+                    }
+                    Err(reason) => {
+                        tracing::warn!(%reason, "the controller's calibration is not used");
+                        (
+                            None,
+                            format!(
+                                "nominal (the controller's calibration does not apply: {reason})"
+                            ),
+                        )
+                    }
+                }
+            }
+            Ok(None) => (
+                None,
+                "nominal (the controller reports no calibration)".to_owned(),
+            ),
+            Err(reason) => (None, format!("nominal (bridge status: {reason})")),
+        };
+        let chain = match &calibration {
+            Some(calibration) => self
+                .nominal_chain
+                .with_dh(&calibration.nominal, &calibration.calibrated)
+                .ok(),
+            None => None,
+        };
+        if calibration != self.calibration {
+            tracing::info!(kinematics = %note, "kinematics for touches");
+        }
+        self.chain = chain.unwrap_or_else(|| self.nominal_chain.clone());
+        self.calibration = calibration;
+        self.kinematics_note = Some(note);
     }
 
     /// Sends one of the thesis's instructions to the bridge and returns its reply (an ack, or
@@ -324,6 +383,7 @@ impl Service {
     }
 
     fn loaded_session(&self) -> Handled<LoadedSession> {
+        // session_file() carries the calibration in use.
         Ok(LoadedSession::resolve(self.session_file(), &self.folder)?)
     }
 

@@ -246,8 +246,11 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         context,
         bridge_side: None,
         files,
+        nominal_chain: chain.clone(),
         chain,
         tool: loaded.tool,
+        calibration: None,
+        kinematics_note: None,
     };
     {
         let stop = Arc::clone(&stop);

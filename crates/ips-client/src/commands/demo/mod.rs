@@ -42,6 +42,12 @@ pub struct DemoArgs {
     /// Encoder noise of 20 urad on every joint of every sample (the session declares 50 um).
     #[arg(long)]
     pub noise: bool,
+    /// A factory-calibrated arm (UR robots): the simulated controller moves with its nominal DH
+    /// table plus the deltas in FILE ({"dh_delta": {"theta": [6], "a": [6], "d": [6], "alpha":
+    /// [6]}}, rad and m) and reports that table on its primary interface; the bridge reads it and
+    /// the service turns joints into touches with it.
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<std::path::PathBuf>,
     /// Print one JSON document instead of text.
     #[arg(long)]
     pub json: bool,
@@ -81,6 +87,15 @@ pub struct DemoOutput {
     pub align_time_s: f64,
     pub pose: Pose,
     pub truth: Pose,
+    /// The controller's calibration the touches were made with (its hash), when the arm had one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration_hash: Option<String>,
+    /// With a calibrated arm: the pose error the same touches give through the nominal
+    /// kinematics, what ignoring the controller's calibration would cost, m and rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal_kinematics_pose_error_m: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal_kinematics_pose_error_rad: Option<f64>,
 }
 
 /// The command: runs the demo and prints its result.
@@ -108,6 +123,23 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
         ))
         .into());
     };
+    if let Some(path) = &args.calibration {
+        if robot.nominal_dh().is_none() {
+            return Err(BadInput(format!(
+                "--calibration: {} has no DH table to calibrate (UR robots only)",
+                robot.name()
+            ))
+            .into());
+        }
+        let text = std::fs::read_to_string(path).map_err(|error| {
+            BadInput(format!(
+                "cannot read calibration {}: {error}",
+                path.display()
+            ))
+        })?;
+        protocol::calibration::CalibrationFile::parse(&text)
+            .map_err(|reason| BadInput(format!("calibration {}: {reason}", path.display())))?;
+    }
     let ips_program =
         std::env::current_exe().map_err(|error| CliError::Failure(error.to_string()))?;
     let folder = std::env::temp_dir().join(format!("cobot-align-demo-{}", std::process::id()));
@@ -122,7 +154,11 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
 
     progress("starting sim-robot, robot-bridge and the alignment service");
     let failure = |error: cell::CellError| CliError::Failure(error.to_string());
-    let cell = Cell::start(robot).map_err(failure)?;
+    let calibration = args
+        .calibration
+        .as_deref()
+        .map(|path| path.canonicalize().unwrap_or_else(|_| path.to_path_buf()));
+    let cell = Cell::start_calibrated(robot, calibration.as_deref()).map_err(failure)?;
     let mut service = cell
         .serve(&ips_program, &session_path, &journal)
         .map_err(failure)?;
@@ -145,6 +181,11 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
         child.terminate(Duration::from_secs(5));
     }
     let diagnosis = super::diagnose::run_file(&saved)?;
+    let nominal_kinematics = if args.calibration.is_some() {
+        Some(align_with_nominal_kinematics(&saved)?)
+    } else {
+        None
+    };
     let _ = std::fs::remove_dir_all(&folder);
     let aligned = captured
         .aligned
@@ -183,7 +224,37 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
         align_time_s: aligned.alignment.time_s,
         pose: aligned.alignment.pose,
         truth: scene.truth_pose(),
+        calibration_hash: nominal_kinematics
+            .as_ref()
+            .and_then(|(_, hash)| hash.clone()),
+        nominal_kinematics_pose_error_m: nominal_kinematics.as_ref().map(|(pose, _)| error(pose).0),
+        nominal_kinematics_pose_error_rad: nominal_kinematics
+            .as_ref()
+            .map(|(pose, _)| error(pose).1),
     })
+}
+
+/// The saved session aligned again with its robot's nominal kinematics (the controller's
+/// calibration dropped), and the calibration's hash: what ignoring the calibration gives.
+fn align_with_nominal_kinematics(
+    saved: &std::path::Path,
+) -> Result<(Isometry3<f64>, Option<String>), CliError> {
+    let text = std::fs::read_to_string(saved)
+        .map_err(|error| CliError::Failure(format!("cannot read {}: {error}", saved.display())))?;
+    let mut file = align_service::session::parse_session_file(&text, &saved.display().to_string())?;
+    let robot = file
+        .robot
+        .as_mut()
+        .ok_or_else(|| CliError::Failure("the saved session has no robot".to_owned()))?;
+    let kinematics = robot.kinematics.take().ok_or_else(|| {
+        CliError::Failure(
+            "the service did not use the controller's calibration (no robot.kinematics in the saved session)".to_owned(),
+        )
+    })?;
+    let folder = saved.parent().unwrap_or(std::path::Path::new("."));
+    let session = align_service::session::LoadedSession::resolve(file, folder)?;
+    let result = align_service::jobs::align::align_session(&session, Default::default())?;
+    Ok((result.alignment.base_from_part, kinematics.hash))
 }
 
 /// Sets the simulator's effects, mirrors, plans and captures the touches, aligns and saves the
@@ -264,6 +335,17 @@ impl DemoOutput {
             self.pose_error_after_diagnosis_m * 1e3,
             self.pose_error_after_diagnosis_rad * 1e3
         );
+        if let (Some(m), Some(rad)) = (
+            self.nominal_kinematics_pose_error_m,
+            self.nominal_kinematics_pose_error_rad,
+        ) {
+            text += &format!(
+                "controller calibration {} used; with the nominal kinematics instead: {:8.3} mm  {:8.3} mrad\n",
+                self.calibration_hash.as_deref().unwrap_or("(no hash)"),
+                m * 1e3,
+                rad * 1e3
+            );
+        }
         text
     }
 }

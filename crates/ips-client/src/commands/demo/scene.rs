@@ -119,6 +119,7 @@ impl Scene {
                 base_link: robot.base_link().to_owned(),
                 tip_link: robot.flange_link().to_owned(),
                 package_dirs: Default::default(),
+                kinematics: None,
             }),
             tool: ToolSection {
                 tcp: pose(&tcp),
