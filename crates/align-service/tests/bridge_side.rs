@@ -70,8 +70,8 @@ fn mirror_through(side: RobotSide) -> Vec<(String, Command)> {
     publisher.bind("tcp://127.0.0.1:*").unwrap();
     let bridge_pub = publisher.get_last_endpoint().unwrap().unwrap();
     let (seen, received) = mpsc::channel();
-    // status (to learn the side), start, stop.
-    let bridge = stand_in_bridge(rep, side, 3, seen);
+    // status (to learn the side), start, status (the controller's kinematics), stop.
+    let bridge = stand_in_bridge(rep, side, 4, seen);
     let journal = std::env::temp_dir().join(format!(
         "cobot-align-bridge-side-{}-{}.journal",
         side.name(),
@@ -112,12 +112,13 @@ fn mirror_through(side: RobotSide) -> Vec<(String, Command)> {
 #[test]
 fn an_iiwa_bridge_is_addressed_as_iiwa_drive() {
     let seen = mirror_through(RobotSide::IiwaDrive);
-    assert_eq!(seen.len(), 3, "{seen:?}");
+    assert_eq!(seen.len(), 4, "{seen:?}");
     assert_eq!(seen[0].1, Command::Status);
     assert_eq!(
         seen[1..],
         [
             ("IiwaDrive".to_owned(), Command::Start),
+            ("IiwaDrive".to_owned(), Command::Status),
             ("IiwaDrive".to_owned(), Command::Stop)
         ]
     );
@@ -130,6 +131,7 @@ fn a_ur_bridge_is_addressed_as_ros_as_in_the_thesis() {
         seen[1..],
         [
             ("ros".to_owned(), Command::Start),
+            ("ros".to_owned(), Command::Status),
             ("ros".to_owned(), Command::Stop)
         ]
     );

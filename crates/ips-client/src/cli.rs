@@ -29,6 +29,12 @@ pub enum Command {
         after_help = "Example:\n  ips fk --urdf robots/ur10.urdf --base base_link --tip tool0 \\\n         --q 0,-1.57,1.57,-1.57,-1.57,0 --json"
     )]
     Fk(commands::fk::FkArgs),
+    /// A UR robot's factory calibration (from its controller's primary interface, or a
+    /// calibration file) as the kinematics file UR's ROS drivers load, with its hash.
+    #[command(
+        after_help = "Examples:\n  ips kinematics --robot ur10e --robot-host 192.168.1.10 > my_robot_calibration.yaml\n  ips kinematics --robot ur10e --calibration calibration.json --json"
+    )]
+    Kinematics(commands::kinematics::KinematicsArgs),
     /// The thesis's alignment trials (PSA): random displacements of a test part, recovered by
     /// the thesis's method and by ours on the same seeds; prints the thesis's table.
     #[command(

@@ -165,6 +165,47 @@ impl MessageReader {
     }
 }
 
+/// Connects to a controller's primary interface at `address` (HOST:PORT) and reads robot state
+/// messages until one carries KINEMATICS_INFO, for at most `within`.
+pub fn read_kinematics(
+    address: &str,
+    within: std::time::Duration,
+) -> Result<KinematicsInfo, String> {
+    use std::net::{TcpStream, ToSocketAddrs};
+    use std::time::{Duration, Instant};
+    let deadline = Instant::now() + within;
+    let socket = address
+        .to_socket_addrs()
+        .map_err(|error| format!("cannot resolve {address}: {error}"))?
+        .next()
+        .ok_or_else(|| format!("{address} names no address"))?;
+    let mut stream = TcpStream::connect_timeout(&socket, within)
+        .map_err(|error| format!("cannot connect to {address}: {error}"))?;
+    let mut reader = MessageReader::new();
+    while Instant::now() < deadline {
+        let left = deadline.saturating_duration_since(Instant::now());
+        stream
+            .set_read_timeout(Some(left.max(Duration::from_millis(1))))
+            .map_err(|error| error.to_string())?;
+        let Some(message) = reader
+            .read_message(&mut stream)
+            .map_err(|error| format!("primary interface at {address}: {error}"))?
+        else {
+            continue;
+        };
+        if let Some(info) = KinematicsInfo::from_message(&message)
+            .map_err(|error| format!("malformed robot state from {address}: {error}"))?
+        {
+            let _ = stream.shutdown(std::net::Shutdown::Both);
+            return Ok(info);
+        }
+    }
+    Err(format!(
+        "no robot state with KINEMATICS_INFO from {address} within {} s",
+        within.as_secs_f64()
+    ))
+}
+
 /// The sub-packages of a robot state message's payload, in order.
 pub fn sub_packages(payload: &[u8]) -> Result<Vec<Frame>, PrimaryError> {
     let mut frames = Vec::new();

@@ -98,6 +98,94 @@ impl DhTable {
     }
 }
 
+/// The joint names of UR's ROS kinematics files, shoulder to flange.
+pub const UR_KINEMATICS_JOINTS: [&str; 6] = [
+    "shoulder",
+    "upper_arm",
+    "forearm",
+    "wrist_1",
+    "wrist_2",
+    "wrist_3",
+];
+
+impl DhTable {
+    /// Each joint's frame in its parent's (the base frame for the first), as UR's ROS
+    /// descriptions take them from a kinematics file: joint i turns about its frame's z, and the
+    /// last joint's frame is the flange.
+    ///
+    /// A calibrated table is written with its joint frames where they physically are: each
+    /// frame slides along its own axis to the point nearest where `nominal` puts the joint, and
+    /// turns about it to face as the nominal frame does (neither changes the kinematics, only
+    /// how they are written), so that d offsets of hundreds of metres on parallel joints become
+    /// millimetres. Refused when the table's flange is not on the last axis (a or alpha of the
+    /// last joint non-zero), which such a file cannot express.
+    pub fn joint_origins(&self, nominal: &DhTable) -> Result<Vec<Isometry3<f64>>, KinematicsError> {
+        let n = self.joints();
+        if nominal.joints() != n || n == 0 {
+            return Err(KinematicsError::Dh(format!(
+                "the tables have {n} and {} joints",
+                nominal.joints()
+            )));
+        }
+        // Joint frames at q = 0: joint i turns about z of DH frame i-1; the nominal ones as the
+        // files write them, moved by d_i along the axis.
+        let dh_frames = |table: &DhTable| -> Vec<Isometry3<f64>> {
+            let mut frames = vec![Isometry3::identity()];
+            for i in 0..table.joints() {
+                let next = frames[i] * table.link(i);
+                frames.push(next);
+            }
+            frames
+        };
+        let calibrated = dh_frames(self);
+        let reference = dh_frames(nominal);
+        let mut joints: Vec<Isometry3<f64>> = (0..n)
+            .map(|i| {
+                let target = reference[i]
+                    * Isometry3::from_parts(
+                        Translation3::new(0.0, 0.0, nominal.d[i]),
+                        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), nominal.theta[i]),
+                    );
+                let frame = calibrated[i];
+                let axis = frame.rotation * Vector3::z();
+                let origin = frame.translation.vector;
+                let along = axis.dot(&(target.translation.vector - origin));
+                let x_target = target.rotation * Vector3::x();
+                let x = (x_target - axis * axis.dot(&x_target))
+                    .try_normalize(1e-9)
+                    .unwrap_or_else(|| frame.rotation * Vector3::x());
+                let rotation = UnitQuaternion::from_rotation_matrix(
+                    &nalgebra::Rotation3::from_basis_unchecked(&[x, axis.cross(&x), axis]),
+                );
+                Isometry3::from_parts(Translation3::from(origin + axis * along), rotation)
+            })
+            .collect();
+        // The last joint's frame is the flange: it must lie on the last axis.
+        let flange = calibrated[n];
+        let last = joints[n - 1];
+        let off_axis = (flange.rotation * Vector3::z()).angle(&(last.rotation * Vector3::z()));
+        let offset = flange.translation.vector - last.translation.vector;
+        let sideways = (offset
+            - (last.rotation * Vector3::z()) * (last.rotation * Vector3::z()).dot(&offset))
+        .norm();
+        if off_axis > 1e-9 || sideways > 1e-9 {
+            return Err(KinematicsError::Dh(format!(
+                "the flange is {:.3} mm and {:.3} mrad off the last joint's axis (a or alpha of the last joint not zero): a kinematics file cannot express that",
+                sideways * 1e3,
+                off_axis * 1e3
+            )));
+        }
+        joints[n - 1] = flange;
+        let mut origins = Vec::with_capacity(n);
+        let mut parent = Isometry3::identity();
+        for frame in joints {
+            origins.push(parent.inverse() * frame);
+            parent = frame;
+        }
+        Ok(origins)
+    }
+}
+
 /// Joint vectors at which a chain must agree with a DH table before it takes the table's
 /// geometry: a spread over each joint's range, deterministic.
 const AGREEMENT_POSES: usize = 8;
@@ -266,6 +354,49 @@ mod tests {
                 "{torques:?} vs {moved_torques:?}"
             );
         }
+    }
+
+    #[test]
+    fn joint_origins_keep_the_kinematics_and_bring_far_frames_back() {
+        let nominal = ur10e();
+        let mut far = nominal.clone();
+        far.d[1] += 440.0;
+        far.d[2] -= 440.1;
+        far.d[3] += 0.1;
+        far.theta[1] += 0.002;
+        far.alpha[2] += 0.001;
+        for table in [&nominal, &far] {
+            let origins = table.joint_origins(&nominal).unwrap();
+            for k in 0..20 {
+                let q: Vec<f64> = (0..6)
+                    .map(|j| ((k * 7 + j * 5) % 13) as f64 * 0.4 - 2.4)
+                    .collect();
+                let from_origins =
+                    origins
+                        .iter()
+                        .zip(&q)
+                        .fold(Isometry3::identity(), |pose, (origin, &value)| {
+                            pose * origin
+                                * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), value)
+                        });
+                let expected = table.forward(&q).unwrap();
+                assert!(
+                    (from_origins.translation.vector - expected.translation.vector).norm() < 1e-9
+                );
+                assert!(from_origins.rotation.angle_to(&expected.rotation) < 1e-9);
+            }
+            // Written near the nominal places: no 440 m anywhere.
+            for origin in &origins {
+                assert!(origin.translation.vector.norm() < 1.0, "{origin}");
+            }
+        }
+        // The nominal table gives the nominal file: shoulder at z = d1, forearm at x = a2.
+        let origins = nominal.joint_origins(&nominal).unwrap();
+        assert!((origins[0].translation.vector - Vector3::new(0.0, 0.0, 0.1807)).norm() < 1e-12);
+        assert!((origins[2].translation.vector - Vector3::new(-0.6127, 0.0, 0.0)).norm() < 1e-12);
+        let mut off = nominal.clone();
+        off.a[5] = 0.01;
+        assert!(off.joint_origins(&nominal).is_err());
     }
 
     #[test]

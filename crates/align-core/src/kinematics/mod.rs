@@ -16,7 +16,7 @@ mod mesh_uri;
 mod model;
 
 pub use chain::{Chain, ChainJoint};
-pub use dh::DhTable;
+pub use dh::{DhTable, UR_KINEMATICS_JOINTS};
 pub use error::{KinematicsError, ModelError};
 pub use gravity::{PointMass, STANDARD_GRAVITY_M_S2};
 pub use ik::{IkError, IkOptions, IkSolution};

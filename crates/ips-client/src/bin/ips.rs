@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use ips_client::cli::{Cli, Command};
 use ips_client::commands::{
-    align, align_cloud, align_robot, demo, diagnose, fk, serve, service, trials,
+    align, align_cloud, align_robot, demo, diagnose, fk, kinematics, serve, service, trials,
 };
 use ips_client::{BadInput, CliError};
 
@@ -32,6 +32,7 @@ fn main() -> ExitCode {
 fn run(command: Command) -> Result<String, CliError> {
     match command {
         Command::Fk(args) => fk::command(&args),
+        Command::Kinematics(args) => kinematics::run(&args),
         Command::Trials(args) => trials::command(&args),
         Command::Align(args) => align::run(&args),
         Command::AlignCloud(args) => align_cloud::run(&args),

@@ -7,6 +7,7 @@ pub mod align_robot;
 pub mod demo;
 pub mod diagnose;
 pub mod fk;
+pub mod kinematics;
 pub mod serve;
 pub mod service;
 pub mod trials;

@@ -243,52 +243,20 @@ impl UrBackend {
     }
 }
 
-/// Connects to the primary interface at `address` and reads robot state messages until one
-/// carries KINEMATICS_INFO, for at most `within`.
+/// The calibrated kinematics of the controller whose primary interface is at `address`, with
+/// their hash, read within `within`.
 pub fn read_kinematics(
     address: &str,
     within: Duration,
 ) -> Result<protocol::calibration::ControllerKinematics, String> {
-    let deadline = Instant::now() + within;
-    let socket = address
-        .to_socket_addrs()
-        .map_err(|error| format!("cannot resolve {address}: {error}"))?
-        .next()
-        .ok_or_else(|| format!("{address} names no address"))?;
-    let mut stream = TcpStream::connect_timeout(&socket, within)
-        .map_err(|error| format!("cannot connect: {error}"))?;
-    let mut reader = ur_primary::MessageReader::new();
-    while Instant::now() < deadline {
-        stream
-            .set_read_timeout(Some(
-                deadline
-                    .saturating_duration_since(Instant::now())
-                    .max(Duration::from_millis(1)),
-            ))
-            .map_err(|error| error.to_string())?;
-        let message = reader
-            .read_message(&mut stream)
-            .map_err(|error| format!("primary interface: {error}"))?;
-        let Some(message) = message else {
-            continue;
-        };
-        if let Some(info) = ur_primary::KinematicsInfo::from_message(&message)
-            .map_err(|error| format!("malformed robot state: {error}"))?
-        {
-            let _ = stream.shutdown(std::net::Shutdown::Both);
-            return Ok(protocol::calibration::ControllerKinematics {
-                dh_theta: info.dh_theta.to_vec(),
-                dh_a: info.dh_a.to_vec(),
-                dh_d: info.dh_d.to_vec(),
-                dh_alpha: info.dh_alpha.to_vec(),
-                hash: Some(info.calibration_hash()),
-            });
-        }
-    }
-    Err(format!(
-        "no robot state with KINEMATICS_INFO within {} s",
-        within.as_secs_f64()
-    ))
+    let info = ur_primary::read_kinematics(address, within)?;
+    Ok(protocol::calibration::ControllerKinematics {
+        dh_theta: info.dh_theta.to_vec(),
+        dh_a: info.dh_a.to_vec(),
+        dh_d: info.dh_d.to_vec(),
+        dh_alpha: info.dh_alpha.to_vec(),
+        hash: Some(info.calibration_hash()),
+    })
 }
 
 /// Reads packages until one of `kind` arrives (text messages and stray data are skipped).
