@@ -261,46 +261,12 @@ fn malformed_flange_poses_are_refused_with_the_reason() {
 /// The UR10's nominal DH table plus set A of the calibration tests in UR's ROS drivers, as a
 /// controller reports it.
 fn calibrated_ur10_kinematics() -> Value {
-    let nominal_a = [0.0, -0.612, -0.5723, 0.0, 0.0, 0.0];
-    let nominal_d = [0.1273, 0.0, 0.0, 0.163941, 0.1157, 0.0922];
-    let half_pi = std::f64::consts::FRAC_PI_2;
-    let nominal_alpha = [half_pi, 0.0, 0.0, half_pi, -half_pi, 0.0];
-    let theta = [
-        -7.290070070824746e-05,
-        -0.01713897289704999,
-        -0.03707159413492756,
-        0.054279462160583214,
-        1.488984257025741e-07,
-        1.551499479707493e-05,
-    ];
-    let a = [
-        4.6311376834935676e-05,
-        -0.00012568315331862312,
-        0.00186216581161458,
-        9.918593870679266e-05,
-        4.215462720453189e-06,
-        0.0,
-    ];
-    let d = [
-        0.00065609212979853,
-        1.4442162376284788,
-        0.854147723854608,
-        -2.2989425877563705,
-        -1.573498686836816e-05,
-        1.9072435590711256e-05,
-    ];
-    let alpha = [
-        0.000211987863869334,
-        -0.0072553625957652995,
-        -0.013483226769541364,
-        0.0013495820227329425,
-        -0.001263136163679901,
-        0.0,
-    ];
-    let plus =
-        |x: &[f64; 6], y: &[f64; 6]| -> Vec<f64> { x.iter().zip(y).map(|(x, y)| x + y).collect() };
-    json!({"dh_theta": theta, "dh_a": plus(&nominal_a, &a), "dh_d": plus(&nominal_d, &d),
-           "dh_alpha": plus(&nominal_alpha, &alpha), "hash": "calib_1"})
+    let table = align_core::corpus::calibrations::ur_driver_calibration("A")
+        .unwrap()
+        .calibrated()
+        .unwrap();
+    json!({"dh_theta": table.theta, "dh_a": table.a, "dh_d": table.d,
+           "dh_alpha": table.alpha, "hash": "calib_1"})
 }
 
 #[test]

@@ -131,20 +131,16 @@ fn demo_finds_an_undeclared_trigger_latency_on_the_fly() {
     demo_with("trigger_latency", "latency_s", 0.05);
 }
 
-/// Set C of the calibration tests in Universal Robots' ROS drivers (a UR10e; d offsets of 439
-/// and -446 m on the parallel joints cancel), as a calibration file.
-const CALIBRATION_C: &str = r#"{"dh_delta": {
- "theta": [-2.41478068943590252e-07, 1.60233952386694556, -1.68607190752171299, 0.0837331147700118711, -1.01260355871157781e-07, 3.91986209186123702e-08],
- "a": [2.12234865571205891e-05, 0.632017132627700651, 0.00229833638891230319, -4.61409023720933908e-05, -6.39280053471801522e-05, 0],
- "d": [-0.000160188285741325043, 439.140974079900957, -446.027059806332147, 6.88618689642360149, -3.86588496858186748e-05, -0.00087908274257374186],
- "alpha": [-0.000650246557584166496, 0.00139416666825590402, 0.00693818880325995126, -0.000811641562390219562, 0.000411120504570705592, 0]}}"#;
-
 #[test]
 fn demo_on_a_calibrated_ur10e_uses_the_controllers_calibration() {
     let folder = std::env::temp_dir().join(format!("ips-demo-calibration-{}", std::process::id()));
     std::fs::create_dir_all(&folder).unwrap();
     let file = folder.join("calibration.json");
-    std::fs::write(&file, CALIBRATION_C).unwrap();
+    // Set C of UR's ROS driver tests: d offsets of 439 and -446 m on the parallel joints cancel.
+    let calibration = align_core::corpus::calibrations::ur_driver_calibration("C")
+        .unwrap()
+        .file_text();
+    std::fs::write(&file, &calibration).unwrap();
     let path = file.display().to_string();
     let result = run_demo(&["demo", "--robot", "ur10e", "--calibration", &path, "--json"]);
     // Read from the controller through the bridge: the pose to well under 0.1 mm ...
@@ -160,7 +156,7 @@ fn demo_on_a_calibrated_ur10e_uses_the_controllers_calibration() {
     let nominal_m = result["nominal_kinematics_pose_error_m"].as_f64().unwrap();
     assert!(nominal_m > 5e-4, "{nominal_m} m: {result}");
     // Bad files and robots are refused before anything starts.
-    std::fs::write(&file, CALIBRATION_C.replacen("\"a\": [", "\"a\": [0, ", 1)).unwrap();
+    std::fs::write(&file, calibration.replacen("\"a\": [", "\"a\": [0, ", 1)).unwrap();
     let output = Command::new(env!("CARGO_BIN_EXE_ips"))
         .args(["demo", "--robot", "ur10e", "--calibration", &path])
         .output()

@@ -5,7 +5,6 @@
 
 use std::process::{Command, Output};
 
-use align_core::kinematics::DhTable;
 use align_core::robots::ShippedRobot;
 
 fn ips(args: &[&str]) -> Output {
@@ -15,42 +14,15 @@ fn ips(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// Deltas of a UR10e calibration: set C of UR's ROS driver tests, rounded.
-const DELTA: [[f64; 6]; 4] = [
-    [
-        -2.4e-07, 1.6023395, -1.6860719, 0.0837331, -1.0e-07, 3.9e-08,
-    ],
-    [2.1e-05, 0.6320171, 0.0022983, -4.6e-05, -6.4e-05, 0.0],
-    [
-        -0.00016, 439.140974, -446.02706, 6.8861869, -3.9e-05, -0.00088,
-    ],
-    [-0.00065, 0.0013942, 0.0069382, -0.0008116, 0.0004111, 0.0],
-];
-
 #[test]
 fn the_controllers_calibration_and_its_file_give_the_same_kinematics_file() {
     let folder = std::env::temp_dir().join(format!("ips-kinematics-{}", std::process::id()));
     std::fs::create_dir_all(&folder).unwrap();
     let file = folder.join("calibration.json");
-    let row = |r: usize| serde_json::to_string(&DELTA[r]).unwrap();
-    std::fs::write(
-        &file,
-        format!(
-            r#"{{"dh_delta": {{"theta": {}, "a": {}, "d": {}, "alpha": {}}}}}"#,
-            row(0),
-            row(1),
-            row(2),
-            row(3)
-        ),
-    )
-    .unwrap();
-    let delta = DhTable::new(
-        DELTA[0].to_vec(),
-        DELTA[1].to_vec(),
-        DELTA[2].to_vec(),
-        DELTA[3].to_vec(),
-    )
-    .unwrap();
+    // Set C of UR's ROS driver tests: d offsets of 439 and -446 m on the parallel joints cancel.
+    let published = align_core::corpus::calibrations::ur_driver_calibration("C").unwrap();
+    std::fs::write(&file, published.file_text()).unwrap();
+    let delta = published.delta.clone();
     let sim = sim_robot::start(&sim_robot::Config {
         robot: ShippedRobot::Ur10e,
         rtde_listen: "127.0.0.1:0".to_owned(),

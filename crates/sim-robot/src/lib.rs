@@ -445,18 +445,15 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
     })
 }
 
-/// The KINEMATICS_INFO a controller with this DH table sends. The checksums and status are what
-/// URSim sends (all bits set, 0): nothing the project reads depends on them.
+/// The KINEMATICS_INFO a controller with this DH table sends.
 fn kinematics_info(table: &DhTable) -> ur_primary::KinematicsInfo {
     let row = |values: &[f64]| std::array::from_fn(|j| values.get(j).copied().unwrap_or(0.0));
-    ur_primary::KinematicsInfo {
-        checksum: [u32::MAX; 6],
-        dh_theta: row(&table.theta),
-        dh_a: row(&table.a),
-        dh_d: row(&table.d),
-        dh_alpha: row(&table.alpha),
-        calibration_status: 0,
-    }
+    ur_primary::KinematicsInfo::from_table(
+        row(&table.theta),
+        row(&table.a),
+        row(&table.d),
+        row(&table.alpha),
+    )
 }
 
 enum Server {

@@ -259,6 +259,24 @@ pub struct KinematicsInfo {
 }
 
 impl KinematicsInfo {
+    /// The KINEMATICS_INFO a controller with this DH table sends; checksums and status as URSim
+    /// sends them (all bits set, 0), which nothing here reads.
+    pub fn from_table(
+        dh_theta: [f64; 6],
+        dh_a: [f64; 6],
+        dh_d: [f64; 6],
+        dh_alpha: [f64; 6],
+    ) -> Self {
+        Self {
+            checksum: [u32::MAX; 6],
+            dh_theta,
+            dh_a,
+            dh_d,
+            dh_alpha,
+            calibration_status: 0,
+        }
+    }
+
     /// The sub-package's payload.
     pub fn encode_payload(&self) -> Vec<u8> {
         let mut bytes = Vec::with_capacity(KINEMATICS_INFO_BYTES);

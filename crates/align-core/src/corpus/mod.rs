@@ -3,13 +3,15 @@
 //! [`parts`]), touches drawn uniformly by area with the tilts people use by hand, side contacts
 //! with the ball's equator and hand-guided noise ([`touches`]), robots written from the vendors'
 //! published DH tables with other base conventions ([`robots`]), and joint-space sessions through
-//! a "true" robot with effects the alignment is not told about ([`sessions`]).
+//! a "true" robot with effects the alignment is not told about ([`sessions`]), and real UR
+//! factory calibrations as UR's ROS drivers publish them ([`calibrations`]).
 //!
 //! Nothing here shares code or assumptions with `trials::planning`, `trials::probing` or
 //! `trials::parts`; `docs/touch-corpus.md` says how the data differ and where every number
 //! comes from.
 
 mod build;
+pub mod calibrations;
 pub mod parts;
 pub mod robots;
 pub mod sessions;

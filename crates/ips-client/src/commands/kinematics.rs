@@ -90,14 +90,12 @@ pub fn run(args: &KinematicsArgs) -> Result<String, CliError> {
                 .plus(&delta)
                 .map_err(|error| BadInput(error.to_string()))?;
             let row = |values: &[f64]| std::array::from_fn(|j| values[j]);
-            ur_primary::KinematicsInfo {
-                checksum: [u32::MAX; 6],
-                dh_theta: row(&table.theta),
-                dh_a: row(&table.a),
-                dh_d: row(&table.d),
-                dh_alpha: row(&table.alpha),
-                calibration_status: 0,
-            }
+            ur_primary::KinematicsInfo::from_table(
+                row(&table.theta),
+                row(&table.a),
+                row(&table.d),
+                row(&table.alpha),
+            )
         }
         _ => {
             return Err(BadInput(
