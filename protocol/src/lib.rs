@@ -37,7 +37,7 @@ pub use envelope::{Envelope, Header, IPS, Message, ProtocolError, to_json};
 pub use journal::JournalEntry;
 pub use pose::Pose;
 pub use service::{
-    AlignCloudRequest, GetRequest, InspectionCountReply, InspectionsReply,
+    AlignCloudRequest, GetReply, GetRequest, InspectionCountReply, InspectionsReply,
     MAX_SERVICE_REQUEST_BYTES, MirroringReply, PathRequest, RemoveRequest, ReplyError, SERVICE,
     SavedReply, ServiceCommand, ServiceReply, ServiceReplyBody, ServiceRequest, StatusReply,
     parse_service_request, service_reply_error, service_reply_ok, service_request,

@@ -317,6 +317,24 @@ pub struct StatusReply {
     pub stale: bool,
 }
 
+/// `get`: the inspection taken, and where its ball is: what an operator checks before the next
+/// touch. Clients that read an [`crate::session::Inspection`] from it ignore the rest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GetReply {
+    #[serde(flatten)]
+    pub inspection: Inspection,
+    /// The ball centre in the robot's base frame, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ball_centre_mm: Option<[f64; 3]>,
+    /// The ball's signed distance from the surface of the part at its nominal pose, mm
+    /// (negative inside): near zero for a touch on the part where the simulation has it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal_surface_distance_mm: Option<f64>,
+    /// A warning about the touch, e.g. a ball far from the nominal part.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
 /// `start` and `stop`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MirroringReply {

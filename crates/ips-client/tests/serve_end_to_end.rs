@@ -185,6 +185,19 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         }
         let got = call(&client, json!({"command": "get"}));
         assert_eq!(got["ok"], true, "{got}");
+        // The reply says where the ball is: in the base frame (mm) and from the nominal part.
+        let centre = got["data"]["ball_centre_mm"].as_array().unwrap();
+        assert!(
+            centre.iter().all(|c| c.as_f64().unwrap().is_finite()),
+            "{got}"
+        );
+        let distance = got["data"]["nominal_surface_distance_mm"].as_f64().unwrap();
+        assert!(distance.is_finite(), "{got}");
+        assert_eq!(
+            got["data"]["note"].is_string(),
+            distance.abs() > 50.0,
+            "{got}"
+        );
     }
     let listed = call(&client, json!({"command": "list"}));
     assert_eq!(listed["data"]["inspections"].as_array().unwrap().len(), 9);

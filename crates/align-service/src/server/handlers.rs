@@ -11,7 +11,7 @@ use nalgebra::{DVector, Vector3};
 use protocol::reports::{AlignReport, CloudReport, DiagnoseReport};
 use protocol::session::{Inspection, SessionFile};
 use protocol::{
-    AlignCloudRequest, Command, InspectionCountReply, InspectionsReply, JournalEntry,
+    AlignCloudRequest, Command, GetReply, InspectionCountReply, InspectionsReply, JournalEntry,
     MirroringReply, ProtocolError, RobotSide, SavedReply, ServiceCommand, ServiceReply,
     StatusReply,
 };
@@ -68,6 +68,9 @@ pub(crate) struct Service {
     pub files: FileAccess,
     pub chain: Chain,
     pub tool: Tool,
+    /// The part and its nominal pose, to say where each touch's ball is.
+    pub part_mesh: align_core::geometry::Mesh,
+    pub base_from_part_nominal: nalgebra::Isometry3<f64>,
     /// The session robot's chain as its description has it (`chain` may be calibrated).
     pub nominal_chain: Chain,
     /// The controller's factory calibration, learnt from the bridge on `start`.
@@ -75,6 +78,10 @@ pub(crate) struct Service {
     /// Which kinematics are in use, for `status`; `None` before the bridge was asked.
     pub kinematics_note: Option<String>,
 }
+
+/// A ball farther than this from the nominal part's surface is named in the `get` reply: a
+/// touch of another object, or a nominal pose far off (the demo's is 42 mm).
+const FAR_FROM_NOMINAL_M: f64 = 0.05;
 
 fn reply<T: Serialize>(result: Handled<T>) -> ServiceReply {
     match result.map(|data| protocol::service_reply_ok(&data)) {
@@ -303,7 +310,7 @@ impl Service {
 
     /// Captures the latest sample, or with `time_s` the first sample at or after that controller
     /// time (a touch-trigger probe's time stamp), as an inspection.
-    fn get(&mut self, time_s: Option<f64>) -> Handled<Inspection> {
+    fn get(&mut self, time_s: Option<f64>) -> Handled<GetReply> {
         let latest = self
             .samples
             .latest()
@@ -334,7 +341,40 @@ impl Service {
         })?;
         self.next_id += 1;
         self.inspections.push(inspection.clone());
-        Ok(inspection)
+        Ok(self.where_the_ball_is(inspection))
+    }
+
+    /// The reply to `get`: the inspection, its ball centre, and how far that is from the part's
+    /// surface at the nominal pose, with a warning when it is too far to be a touch of it.
+    fn where_the_ball_is(&self, inspection: Inspection) -> GetReply {
+        let Some(q) = &inspection.q else {
+            return GetReply {
+                inspection,
+                ball_centre_mm: None,
+                nominal_surface_distance_mm: None,
+                note: None,
+            };
+        };
+        let centre = self
+            .tool
+            .base_from_tcp(&self.chain.forward_unchecked(q))
+            .translation
+            .vector;
+        let in_part = self.base_from_part_nominal.inverse() * nalgebra::Point3::from(centre);
+        let distance_m =
+            self.part_mesh.signed_closest(&in_part).signed_distance_m - self.tool.tip_radius_m;
+        let note = (distance_m.abs() > FAR_FROM_NOMINAL_M).then(|| {
+            format!(
+                "the ball is {:.1} mm from the nominal part's surface: probably not a touch of this part, or the nominal pose is that far off",
+                distance_m * 1e3
+            )
+        });
+        GetReply {
+            inspection,
+            ball_centre_mm: Some([centre.x * 1e3, centre.y * 1e3, centre.z * 1e3]),
+            nominal_surface_distance_mm: Some(distance_m * 1e3),
+            note,
+        }
     }
 
     /// Refuses a sample whose tool moves faster than the limit: a touch is taken at rest.

@@ -249,6 +249,8 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         nominal_chain: chain.clone(),
         chain,
         tool: loaded.tool,
+        part_mesh: loaded.mesh,
+        base_from_part_nominal: loaded.base_from_part_nominal,
         calibration: None,
         kinematics_note: None,
     };

@@ -4,10 +4,9 @@
 use std::time::Duration;
 
 use clap::Args;
-use protocol::session::Inspection;
 use protocol::{
-    GetRequest, InspectionCountReply, InspectionsReply, MirroringReply, PathRequest, RemoveRequest,
-    SavedReply, ServiceCommand, StatusReply,
+    GetReply, GetRequest, InspectionCountReply, InspectionsReply, MirroringReply, PathRequest,
+    RemoveRequest, SavedReply, ServiceCommand, StatusReply,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -77,9 +76,13 @@ fn call<T: DeserializeOwned + Serialize>(
     }
 }
 
-fn joints(q: Option<&Vec<f64>>) -> String {
+/// Joint values in degrees, as a person reads them (the JSON keeps radians).
+fn joints_deg(q: Option<&Vec<f64>>) -> String {
     match q {
-        Some(q) => serde_json::to_string(q).unwrap_or_default(),
+        Some(q) => {
+            let values: Vec<String> = q.iter().map(|v| format!("{:.3}", v.to_degrees())).collect();
+            format!("[{}]", values.join(", "))
+        }
         None => "null".to_owned(),
     }
 }
@@ -120,12 +123,23 @@ pub fn get(args: &GetArgs) -> Result<String, CliError> {
         return Err(BadInput("--at must be a finite controller time in s".to_owned()).into());
     }
     let command = ServiceCommand::Get(GetRequest { time_s: args.at });
-    call(&args.service, command, |inspection: &Inspection| {
-        format!(
-            "inspection \"{}\" at q = {}\n",
-            inspection.id,
-            joints(inspection.q.as_ref())
-        )
+    call(&args.service, command, |reply: &GetReply| {
+        let mut text = format!(
+            "inspection \"{}\" at q = {} deg\n",
+            reply.inspection.id,
+            joints_deg(reply.inspection.q.as_ref())
+        );
+        if let (Some([x, y, z]), Some(distance)) =
+            (reply.ball_centre_mm, reply.nominal_surface_distance_mm)
+        {
+            text += &format!(
+                "  ball centre ({x:.2}, {y:.2}, {z:.2}) mm in the base frame, {distance:+.2} mm from the nominal part's surface\n"
+            );
+        }
+        if let Some(note) = &reply.note {
+            text += &format!("  note: {note}\n");
+        }
+        text
     })
 }
 
@@ -134,9 +148,9 @@ pub fn list(args: &ServiceArgs) -> Result<String, CliError> {
         let mut text = String::new();
         for inspection in &reply.inspections {
             text += &format!(
-                "{:>6}  q = {}\n",
+                "{:>6}  q = {} deg\n",
                 inspection.id,
-                joints(inspection.q.as_ref())
+                joints_deg(inspection.q.as_ref())
             );
         }
         if text.is_empty() {
