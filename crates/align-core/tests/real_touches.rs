@@ -395,6 +395,22 @@ fn describe(diagnosis: &align_core::diagnosis::Diagnosis) -> String {
     )
 }
 
+/// A UR5e session of `count` touches on `mesh` made with `hidden` effects, aligned from the
+/// truth and diagnosed with the declared `sigma`; the 15 cm straight probe with a 3 mm ball.
+fn diagnosed(
+    chain: &Chain,
+    mesh: &Mesh,
+    hidden: &HiddenEffects,
+    count: usize,
+    sigma: f64,
+    seed: u64,
+) -> align_core::diagnosis::Diagnosis {
+    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
+    let session = session_on(chain, hidden, mesh, count, sigma, seed);
+    let start = aligned(chain, &tool, mesh, &session);
+    diagnose(Some(chain), &tool, mesh, &samples(&session), &start, sigma).unwrap()
+}
+
 /// Regression (independent synthetic sessions, issue 18): gravity sag was missed in one session
 /// of three. A UR5e from UR's published DH table and masses, a hidden compliance on the shoulder
 /// and elbow, 24 touches on a small plate: found, with the held-out error falling, or at worst
@@ -404,23 +420,12 @@ fn describe(diagnosis: &align_core::diagnosis::Diagnosis) -> String {
 fn gravity_sag_of_an_independent_robot_is_found_or_tied_never_missed() {
     let chain = ur5e();
     let mesh = fixture_plate().unwrap();
-    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
     let mut hidden = HiddenEffects::none(6);
     hidden.compliance_rad_per_nm = vec![0.0, 4e-5, 6e-5, 0.0, 0.0, 0.0];
     let sigma = 5e-5;
     let mut found = 0;
     for seed in [21, 22, 23] {
-        let session = session_on(&chain, &hidden, &mesh, 24, sigma, seed);
-        let start = aligned(&chain, &tool, &mesh, &session);
-        let diagnosis = diagnose(
-            Some(&chain),
-            &tool,
-            &mesh,
-            &samples(&session),
-            &start,
-            sigma,
-        )
-        .unwrap();
+        let diagnosis = diagnosed(&chain, &mesh, &hidden, 24, sigma, seed);
         let report = describe(&diagnosis);
         println!("seed {seed}: {report}");
         let (name, fit) = diagnosis.effect.clone().unwrap();
@@ -453,24 +458,13 @@ fn gravity_sag_of_an_independent_robot_is_found_or_tied_never_missed() {
 fn a_tcp_error_and_a_part_scale_together_are_found_as_a_pair() {
     let chain = ur5e();
     let mesh = fixture_plate().unwrap();
-    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
     let mut hidden = HiddenEffects::none(6);
     hidden.tcp_error_m = Vector3::new(0.0015, -0.001, 0.0);
     hidden.part_scale = 1.004;
     let sigma = 5e-5;
     let mut found = 0;
     for seed in [31, 32, 33] {
-        let session = session_on(&chain, &hidden, &mesh, 40, sigma, seed);
-        let start = aligned(&chain, &tool, &mesh, &session);
-        let diagnosis = diagnose(
-            Some(&chain),
-            &tool,
-            &mesh,
-            &samples(&session),
-            &start,
-            sigma,
-        )
-        .unwrap();
+        let diagnosis = diagnosed(&chain, &mesh, &hidden, 40, sigma, seed);
         let report = describe(&diagnosis);
         println!("seed {seed}: {report}");
         // Never a single effect named in the pair's place.
@@ -577,23 +571,12 @@ fn with_a_tcp_or_kinematic_error_the_alignment_reaches_the_pose_only_optimum() {
 fn a_lateral_tcp_error_under_real_noise_is_found() {
     let chain = ur5e();
     let mesh = fixture_plate().unwrap();
-    let tool = Tool::new(Isometry3::translation(0.0, 0.0, 0.15), 0.003, 0.0).unwrap();
     let mut hidden = HiddenEffects::none(6);
     hidden.tcp_error_m = Vector3::new(0.002, 0.0, 0.0);
     let sigma = 3e-4;
     let mut found = 0;
     for seed in [51, 52, 53] {
-        let session = session_on(&chain, &hidden, &mesh, 65, sigma, seed);
-        let start = aligned(&chain, &tool, &mesh, &session);
-        let diagnosis = diagnose(
-            Some(&chain),
-            &tool,
-            &mesh,
-            &samples(&session),
-            &start,
-            sigma,
-        )
-        .unwrap();
+        let diagnosis = diagnosed(&chain, &mesh, &hidden, 65, sigma, seed);
         let report = describe(&diagnosis);
         println!("seed {seed}: {report}");
         assert_ne!(
