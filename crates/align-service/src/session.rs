@@ -51,17 +51,9 @@ impl LoadedSession {
         Self::resolve(file, folder)
     }
 
+    /// Resolves `file`; a `robot.kinematics` in it (the controller's calibrated DH table)
+    /// replaces the description's geometry when joints become flange poses.
     pub fn resolve(file: SessionFile, folder: &Path) -> Result<Self, BadInput> {
-        Self::resolve_calibrated(file, folder, None)
-    }
-
-    /// [`LoadedSession::resolve`] with the robot's joints turned into flange poses by its
-    /// calibrated kinematics: the controller's DH table replaces the description's geometry.
-    pub fn resolve_calibrated(
-        file: SessionFile,
-        folder: &Path,
-        calibration: Option<&Calibration>,
-    ) -> Result<Self, BadInput> {
         let relative = |p: &str| -> PathBuf { folder.join(p) };
         let chain = match &file.robot {
             Some(robot) => {
@@ -79,22 +71,14 @@ impl LoadedSession {
             }
             None => None,
         };
-        // The file's own calibration, unless the caller brings a newer one.
-        let from_file = match (
-            &chain,
+        let chain = match (
+            chain,
             file.robot.as_ref().and_then(|r| r.kinematics.as_ref()),
         ) {
             (Some(chain), Some(kinematics)) => Some(
-                Calibration::for_chain(kinematics, chain)
+                Calibration::for_chain(kinematics, &chain)
+                    .and_then(|calibration| calibration.apply(&chain))
                     .map_err(|reason| BadInput(format!("robot.kinematics: {reason}")))?,
-            ),
-            _ => None,
-        };
-        let chain = match (chain, calibration.or(from_file.as_ref())) {
-            (Some(chain), Some(calibration)) => Some(
-                chain
-                    .with_dh(&calibration.nominal, &calibration.calibrated)
-                    .map_err(BadInput::new)?,
             ),
             (chain, _) => chain,
         };
@@ -206,6 +190,13 @@ impl Calibration {
             calibrated,
             hash: kinematics.hash.clone(),
         })
+    }
+
+    /// `chain` (the robot's description, base to flange) with the calibrated geometry.
+    pub fn apply(&self, chain: &Chain) -> Result<Chain, String> {
+        chain
+            .with_dh(&self.nominal, &self.calibrated)
+            .map_err(|error| error.to_string())
     }
 
     /// As a session file's `robot.kinematics`.

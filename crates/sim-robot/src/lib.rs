@@ -317,27 +317,26 @@ pub fn start(config: &Config) -> Result<SimHandle, SimError> {
         .robot
         .chain()
         .map_err(|e| SimError::Model(e.to_string()))?;
-    // The DH table the arm really moves with: nominal, or nominal plus the calibration.
-    let table = match (config.robot.nominal_dh(), &config.calibration) {
-        (Some(nominal), Some(delta)) => Some(
-            nominal
+    // The DH table the arm really moves with (nominal, or nominal plus the calibration) and the
+    // chain that moves with it.
+    let (chain, table) = match (config.robot.nominal_dh(), &config.calibration) {
+        (Some(nominal), Some(delta)) => {
+            let table = nominal
                 .plus(delta)
-                .map_err(|e| SimError::Calibration(e.to_string()))?,
-        ),
-        (Some(nominal), None) => Some(nominal),
+                .map_err(|e| SimError::Calibration(e.to_string()))?;
+            let chain = nominal_chain
+                .with_dh(&nominal, &table)
+                .map_err(|e| SimError::Calibration(e.to_string()))?;
+            (chain, Some(table))
+        }
+        (Some(nominal), None) => (nominal_chain, Some(nominal)),
         (None, Some(_)) => {
             return Err(SimError::Calibration(format!(
                 "{} has no DH table to calibrate (UR robots only)",
                 config.robot.name()
             )));
         }
-        (None, None) => None,
-    };
-    let chain = match (config.robot.nominal_dh(), &table, &config.calibration) {
-        (Some(nominal), Some(table), Some(_)) => nominal_chain
-            .with_dh(&nominal, table)
-            .map_err(|e| SimError::Calibration(e.to_string()))?,
-        _ => nominal_chain,
+        (None, None) => (nominal_chain, None),
     };
     let primary_listener = match (&config.primary_listen, &table) {
         (Some(address), Some(_)) => {

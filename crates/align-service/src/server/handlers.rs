@@ -227,41 +227,30 @@ impl Service {
     fn learn_kinematics(&mut self) {
         let side = self.bridge_side.unwrap_or(RobotSide::Ros);
         let status: Result<protocol::Status, String> = self.instruct(side, Command::Status);
-        let (calibration, note) = match status.map(|status| status.body.kinematics) {
-            Ok(Some(kinematics)) => {
-                match Calibration::for_chain(&kinematics, &self.nominal_chain) {
-                    Ok(calibration) => {
-                        let note = calibration.describe();
-                        (Some(calibration), note)
-                    }
-                    Err(reason) => {
-                        tracing::warn!(%reason, "the controller's calibration is not used");
-                        (
-                            None,
-                            format!(
-                                "nominal (the controller's calibration does not apply: {reason})"
-                            ),
-                        )
-                    }
-                }
-            }
-            Ok(None) => (
-                None,
-                "nominal (the controller reports no calibration)".to_owned(),
-            ),
-            Err(reason) => (None, format!("nominal (bridge status: {reason})")),
+        let applied = match status.map(|status| status.body.kinematics) {
+            Ok(Some(kinematics)) => Calibration::for_chain(&kinematics, &self.nominal_chain)
+                .and_then(|calibration| {
+                    let chain = calibration.apply(&self.nominal_chain)?;
+                    Ok((calibration, chain))
+                })
+                .map_err(|reason| {
+                    tracing::warn!(%reason, "the controller's calibration is not used");
+                    format!("nominal (the controller's calibration does not apply: {reason})")
+                }),
+            Ok(None) => Err("nominal (the controller reports no calibration)".to_owned()),
+            Err(reason) => Err(format!("nominal (bridge status: {reason})")),
         };
-        let chain = match &calibration {
-            Some(calibration) => self
-                .nominal_chain
-                .with_dh(&calibration.nominal, &calibration.calibrated)
-                .ok(),
-            None => None,
+        let (calibration, chain, note) = match applied {
+            Ok((calibration, chain)) => {
+                let note = calibration.describe();
+                (Some(calibration), chain, note)
+            }
+            Err(note) => (None, self.nominal_chain.clone(), note),
         };
         if calibration != self.calibration {
             tracing::info!(kinematics = %note, "kinematics for touches");
         }
-        self.chain = chain.unwrap_or_else(|| self.nominal_chain.clone());
+        self.chain = chain;
         self.calibration = calibration;
         self.kinematics_note = Some(note);
     }
