@@ -120,8 +120,6 @@ pub(super) struct Screened {
     explore: PsaOptions,
     /// Each start's screening run, in the order of the starts.
     runs: Vec<LocalSolution>,
-    /// The best screening RMS, m.
-    best_rms_m: f64,
 }
 
 /// Short local runs from `count` orientations spread over SO(3), each translated so that the
@@ -164,13 +162,21 @@ pub(super) fn screen(
         max_iterations: explore.slide_first + SCREENING_STEPS,
         ..explore.clone()
     };
-    let mut best_rms_m = f64::INFINITY;
-    let runs = run_chunks(target, &subset, &screen, &starts, &mut best_rms_m, radius_m)?;
+    // No screening run is abandoned (they stop before the abandon check), so the threshold they
+    // keep is not needed afterwards.
+    let mut unused_best_rms_m = f64::INFINITY;
+    let runs = run_chunks(
+        target,
+        &subset,
+        &screen,
+        &starts,
+        &mut unused_best_rms_m,
+        radius_m,
+    )?;
     Ok(Screened {
         subset,
         explore,
         runs,
-        best_rms_m,
     })
 }
 
@@ -186,7 +192,6 @@ pub(super) fn explore(
         subset,
         explore,
         runs,
-        best_rms_m: screened_best_m,
     } = screened;
     let mut order: Vec<usize> = (0..runs.len()).collect();
     order.sort_by(|a, b| runs[*a].rms_m.total_cmp(&runs[*b].rms_m));
@@ -196,7 +201,7 @@ pub(super) fn explore(
         slide_first: 0,
         ..explore
     };
-    let mut best_rms = best_rms_m.min(screened_best_m);
+    let mut best_rms = runs.iter().map(|s| s.rms_m).fold(best_rms_m, f64::min);
     let radius_m = target.mesh().radius_m();
     let mut solutions = run_chunks(
         target,
