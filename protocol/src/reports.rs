@@ -13,6 +13,9 @@ pub struct Residual {
     pub id: String,
     /// Signed distance of the touch from the aligned surface (ball radius removed), m.
     pub distance: f64,
+    /// The ball centre in the robot base frame, m (what `--export csv` lists).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ball_centre: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -115,6 +118,9 @@ pub struct AlignReport {
     pub uncertainty: Option<Uncertainty>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uncertainty_error: Option<String>,
+    /// The robot base frame the pose is relative to (the session's `base_link`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_frame: Option<String>,
 }
 
 /// As `ips align` (DESIGN.md 6.4); for clouds `residuals` is empty (thousands of points) and the
@@ -152,6 +158,9 @@ pub struct DiagnoseReport {
     /// its session is in memory).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plot: Option<String>,
+    /// The robot base frame the poses are relative to (the session's `base_link`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_frame: Option<String>,
 }
 
 /// A fitted effect: its parameters and their standard errors, by parameter name (units in the
@@ -188,4 +197,7 @@ pub struct InspectionResidual {
     pub id: String,
     pub residual_after: f64,
     pub residual_before: f64,
+    /// The ball centre in the robot base frame after the effect is applied, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ball_centre_after: Option<[f64; 3]>,
 }

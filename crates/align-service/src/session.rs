@@ -42,6 +42,15 @@ fn pose(section: &Pose, what: &str) -> Result<Isometry3<f64>, BadInput> {
 }
 
 impl LoadedSession {
+    /// The robot base frame every pose is relative to: the robot's `base_link`, or `base` for a
+    /// session of flange poses without a robot.
+    pub fn base_frame(&self) -> &str {
+        self.file
+            .robot
+            .as_ref()
+            .map_or("base", |robot| robot.base_link.as_str())
+    }
+
     pub fn load(path: &Path) -> Result<Self, BadInput> {
         let text = std::fs::read_to_string(path).map_err(|error| {
             BadInput(format!("cannot read session '{}': {error}", path.display()))

@@ -44,7 +44,7 @@ mod effects;
 mod model;
 mod selection;
 
-use nalgebra::{DVector, Isometry3};
+use nalgebra::{DVector, Isometry3, Point3};
 
 pub use effects::{Effect, UnknownEffect};
 use model::Problem;
@@ -89,6 +89,8 @@ impl TouchSample {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fit {
     pub base_from_part: Isometry3<f64>,
+    /// Each touch's ball centre in the base frame under the fitted effect.
+    pub ball_centres_m: Vec<Point3<f64>>,
     pub residuals_m: Vec<f64>,
     pub rms_m: f64,
     pub max_m: f64,

@@ -363,8 +363,10 @@ impl Problem<'_> {
                 )
             })
             .collect();
+        let extras = self.extras(params, theta);
         Ok(Fit {
             base_from_part: self.pose(theta),
+            ball_centres_m: (0..n).map(|i| self.centre_in_base(i, &extras)).collect(),
             rms_m: (rss / n as f64).sqrt(),
             max_m: residual.iter().fold(0.0f64, |m, r| m.max(r.abs())),
             loo_rms_m: press_rms(&jacobian, &covariance, &residual),

@@ -4,6 +4,7 @@
 //! Every error names the file and the problem, so a user with twenty files open knows which one
 //! to fix and how.
 
+pub mod export;
 mod mesh_formats;
 mod ply;
 mod point_formats;

@@ -116,6 +116,14 @@ pub fn report(session: &LoadedSession, result: &PsaResult) -> AlignReport {
         .notes_with_unit_scale(session.file.part.mesh_scale);
     notes.extend(tool_warning(&session.tool));
     let mut aligned = output(result, notes);
+    for residual in &mut aligned.alignment.residuals {
+        residual.ball_centre = session
+            .touches
+            .iter()
+            .find(|touch| touch.id == residual.id)
+            .map(|touch| point_array(&touch.point));
+    }
+    aligned.base_frame = Some(session.base_frame().to_owned());
     match uncertainty(session, result) {
         Ok(json) => aligned.uncertainty = Some(json),
         Err(why) => aligned.uncertainty_error = Some(why),
@@ -214,6 +222,7 @@ fn output(result: &PsaResult, notes: Vec<String>) -> AlignReport {
         .map(|r| Residual {
             id: r.id.clone(),
             distance: r.distance_m,
+            ball_centre: None,
         })
         .collect();
     AlignReport {
@@ -231,5 +240,6 @@ fn output(result: &PsaResult, notes: Vec<String>) -> AlignReport {
         notes,
         uncertainty: None,
         uncertainty_error: None,
+        base_frame: None,
     }
 }

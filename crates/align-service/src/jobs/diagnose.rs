@@ -17,6 +17,8 @@ pub struct SessionDiagnosis {
     pub diagnosis: Diagnosis,
     pub samples: Vec<TouchSample>,
     pub noise_sigma_m: f64,
+    /// The session's robot base frame, which the poses are relative to.
+    pub base_frame: String,
 }
 
 /// Aligns the session's part to its inspections, then diagnoses the residual against the
@@ -55,6 +57,7 @@ pub fn diagnose_session(session: &LoadedSession) -> Result<SessionDiagnosis, Bad
         diagnosis,
         samples,
         noise_sigma_m: sigma,
+        base_frame: session.base_frame().to_owned(),
     })
 }
 
@@ -90,11 +93,17 @@ impl SessionDiagnosis {
                     id: s.id.clone(),
                     residual_after: diagnosis.after.residuals_m[i],
                     residual_before: diagnosis.before.residuals_m[i],
+                    ball_centre_after: diagnosis
+                        .after
+                        .ball_centres_m
+                        .get(i)
+                        .map(|p| [p.x, p.y, p.z]),
                 })
                 .collect(),
             explanation: diagnosis.explanation.clone(),
             chi_square: [diagnosis.chi_square.0, diagnosis.chi_square.1],
             plot,
+            base_frame: Some(self.base_frame.clone()),
         }
     }
 }

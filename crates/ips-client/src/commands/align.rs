@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use align_core::io::export::ExportFormat;
 use align_service::jobs::align::{AlignChoices, align_session, report};
 use align_service::session::LoadedSession;
 use clap::Args;
@@ -30,8 +31,10 @@ pub struct AlignArgs {
     #[arg(long)]
     pub no_coherence: bool,
     /// Print one JSON document instead of text.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "export")]
     pub json: bool,
+    #[arg(long, value_name = "FORMAT", value_parser = crate::export::parse_format, help = crate::export::HELP)]
+    pub export: Option<ExportFormat>,
 }
 
 pub fn run(args: &AlignArgs) -> Result<String, CliError> {
@@ -52,7 +55,13 @@ pub fn run(args: &AlignArgs) -> Result<String, CliError> {
             );
         }
     };
-    if args.json {
+    if let Some(format) = args.export {
+        let mesh = args
+            .session
+            .as_deref()
+            .and_then(crate::export::session_mesh);
+        crate::export::alignment(format, &report, mesh)
+    } else if args.json {
         json_line(&report)
     } else {
         Ok(to_text(&report))

@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use align_core::diagnosis::{Diagnosis, TouchSample};
+use align_core::io::export::ExportFormat;
 use align_core::pose::isometry_from_xyz_rpy;
 use align_service::jobs::diagnose::diagnose_session;
 use align_service::session::LoadedSession;
@@ -32,8 +33,10 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "ENDPOINT")]
     pub service: Option<String>,
     /// Print one JSON document instead of text.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "export")]
     pub json: bool,
+    #[arg(long, value_name = "FORMAT", value_parser = crate::export::parse_format, help = crate::export::HELP)]
+    pub export: Option<ExportFormat>,
 }
 
 /// The command: the SESSION file diagnosed here, or the service `--service` names asked.
@@ -47,7 +50,13 @@ pub fn run(args: &DiagnoseArgs) -> Result<String, CliError> {
             );
         }
     };
-    if args.json {
+    if let Some(format) = args.export {
+        let mesh = args
+            .session
+            .as_deref()
+            .and_then(crate::export::session_mesh);
+        crate::export::diagnosis(format, &report, mesh)
+    } else if args.json {
         json_line(&report)
     } else {
         Ok(to_text(&report))
