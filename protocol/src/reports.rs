@@ -201,3 +201,27 @@ pub struct InspectionResidual {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ball_centre_after: Option<[f64; 3]>,
 }
+
+/// One value `ips diagnose --apply` changed in the session, in the file's unit (`unit`: m, rad,
+/// rad/(N m), s, or empty for the unitless mesh scale), with a line for people.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AppliedChange {
+    /// Where in the session file, e.g. `tool.tcp.xyz[2]` or `robot.joint_offsets[1]`.
+    pub key: String,
+    pub before: f64,
+    pub after: f64,
+    pub unit: String,
+    pub text: String,
+}
+
+/// What `ips diagnose SESSION --apply OUT --json` prints: the corrected session written, the
+/// effect applied and each change.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AppliedReport {
+    pub path: String,
+    pub effect: String,
+    pub changes: Vec<AppliedChange>,
+    /// The diagnosis's residual rms before and after the effect, m.
+    pub rms_before: f64,
+    pub rms_after: f64,
+}

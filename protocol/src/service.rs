@@ -358,4 +358,8 @@ pub struct InspectionCountReply {
 pub struct SavedReply {
     pub inspections: usize,
     pub path: String,
+    /// The results written with the inspections (`alignment`, `diagnosis`): the last ones
+    /// computed from exactly these inspections.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub results: Vec<String>,
 }

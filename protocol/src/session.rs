@@ -22,6 +22,26 @@ pub struct SessionFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_sigma: Option<f64>,
     pub inspections: Vec<Inspection>,
+    /// What the service last found for these inspections, as `ips save` wrote it: kept with the
+    /// touches it came from, never read back as an input.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub results: Option<SessionResults>,
+}
+
+/// The last alignment and diagnosis a service computed, each with the inspections it used.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SessionResults {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alignment: Option<SavedResult<crate::reports::AlignReport>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diagnosis: Option<SavedResult<crate::reports::DiagnoseReport>>,
+}
+
+/// A report and the ids of the inspections it was computed from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedResult<T> {
+    pub inspections: Vec<String>,
+    pub report: T,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -36,6 +56,18 @@ pub struct RobotSection {
     /// geometry. Optional; a saved session keeps it so that offline tools agree with the service.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<crate::calibration::ControllerKinematics>,
+    /// Joint zero offsets, rad, one per joint: added to every inspection's joints before forward
+    /// kinematics (what `ips diagnose --apply` writes for `joint_offsets`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_offsets: Option<Vec<f64>>,
+    /// Joint compliance, rad/(N m), one per joint: each joint deflects by this times the gravity
+    /// torque on it (the links' inertials and the tool's mass) at the inspection.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_compliance: Option<Vec<f64>>,
+    /// Capture latency, s: the joints were read this long after the touch, so they are taken
+    /// back along their velocity (q - qd * latency); inspections without `qd` are unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trigger_latency_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

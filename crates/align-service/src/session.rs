@@ -5,13 +5,13 @@ use std::path::{Path, PathBuf};
 
 use align_core::geometry::Mesh;
 use align_core::io::read_mesh;
-use align_core::kinematics::{Chain, DhTable, PackageMap, RobotModel};
+use align_core::kinematics::{Chain, DhTable, PackageMap, PointMass, RobotModel};
 use align_core::pose::isometry_from_xyz_rpy;
 use align_core::registration::psa::{Face, Touch};
 use align_core::tool::Tool;
 use nalgebra::{Isometry3, Point3, Vector3};
 use protocol::Pose;
-use protocol::session::{FORMAT, Inspection, SessionFile};
+use protocol::session::{FORMAT, Inspection, RobotSection, SessionFile};
 
 use crate::BadInput;
 
@@ -26,6 +26,8 @@ pub struct LoadedSession {
     pub faces: Vec<Face>,
     pub base_from_part_nominal: Isometry3<f64>,
     pub touches: Vec<Touch>,
+    /// The robot section's joint corrections, applied to every inspection's joints.
+    pub corrections: JointCorrections,
 }
 
 fn pose(section: &Pose, what: &str) -> Result<Isometry3<f64>, BadInput> {
@@ -119,9 +121,14 @@ impl LoadedSession {
                 "noise_sigma must be finite and >= 0, got {sigma}"
             )));
         }
+        let corrections = match (&file.robot, &chain) {
+            (Some(robot), Some(chain)) => JointCorrections::new(robot, chain, &tool)?,
+            _ => JointCorrections::default(),
+        };
         let mut touches = Vec::with_capacity(file.inspections.len());
         for inspection in &file.inspections {
-            let base_from_flange = base_from_flange(inspection, chain.as_ref())?;
+            let corrected = corrections.corrected_inspection(inspection, chain.as_ref());
+            let base_from_flange = base_from_flange(&corrected, chain.as_ref())?;
             let base_from_tcp = tool.base_from_tcp(&base_from_flange);
             touches.push(Touch {
                 id: inspection.id.clone(),
@@ -140,7 +147,107 @@ impl LoadedSession {
             faces,
             base_from_part_nominal,
             touches,
+            corrections,
         })
+    }
+}
+
+/// The joint corrections a session's robot section declares (`joint_offsets`,
+/// `joint_compliance`, `trigger_latency_s`), checked against its chain. With none, joints are
+/// used as captured.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct JointCorrections {
+    offsets_rad: Option<Vec<f64>>,
+    compliance_rad_per_nm: Option<Vec<f64>>,
+    latency_s: f64,
+    payload: Option<PointMass>,
+}
+
+/// The longest capture latency a session may declare, s: longer is a unit mistake (ms).
+const MAX_LATENCY_S: f64 = 1.0;
+
+impl JointCorrections {
+    fn new(robot: &RobotSection, chain: &Chain, tool: &Tool) -> Result<Self, BadInput> {
+        let per_joint = |values: &Option<Vec<f64>>, key: &str| -> Result<(), BadInput> {
+            let Some(values) = values else { return Ok(()) };
+            if values.len() != chain.dof() {
+                return Err(BadInput(format!(
+                    "robot.{key} has {} values, the robot {} joints",
+                    values.len(),
+                    chain.dof()
+                )));
+            }
+            match values.iter().position(|v| !v.is_finite()) {
+                Some(index) => Err(BadInput(format!(
+                    "robot.{key}[{index}] is not a finite number"
+                ))),
+                None => Ok(()),
+            }
+        };
+        per_joint(&robot.joint_offsets, "joint_offsets")?;
+        per_joint(&robot.joint_compliance, "joint_compliance")?;
+        let latency_s = robot.trigger_latency_s.unwrap_or(0.0);
+        if !(latency_s.is_finite() && latency_s.abs() <= MAX_LATENCY_S) {
+            return Err(BadInput(format!(
+                "robot.trigger_latency_s = {latency_s} must be finite and within +-{MAX_LATENCY_S} s (is it in ms?)"
+            )));
+        }
+        Ok(Self {
+            offsets_rad: robot.joint_offsets.clone(),
+            compliance_rad_per_nm: robot.joint_compliance.clone(),
+            latency_s,
+            payload: Some(PointMass {
+                mass_kg: tool.mass_kg,
+                com_in_tip: tool.com_in_flange,
+            }),
+        })
+    }
+
+    /// True when no correction changes a joint.
+    pub fn is_empty(&self) -> bool {
+        self.offsets_rad.is_none() && self.compliance_rad_per_nm.is_none() && self.latency_s == 0.0
+    }
+
+    /// The joints the model uses for captured joints `q` (velocities `qd`): latency first
+    /// (where the joints were at the touch), then the offsets and the gravity deflection, as the
+    /// diagnosis models them.
+    pub fn corrected(&self, q: &[f64], qd: Option<&[f64]>, chain: &Chain) -> Vec<f64> {
+        let mut corrected = q.to_vec();
+        if q.len() != chain.dof() {
+            // base_from_flange refuses the inspection with the reason.
+            return corrected;
+        }
+        if let Some(offsets) = &self.offsets_rad {
+            corrected.iter_mut().zip(offsets).for_each(|(v, o)| *v += o);
+        }
+        if let Some(compliance) = &self.compliance_rad_per_nm {
+            let torques = chain.gravity_torques_nm(q, self.payload.as_ref());
+            for ((v, c), t) in corrected.iter_mut().zip(compliance).zip(torques) {
+                *v += c * t;
+            }
+        }
+        if let Some(qd) = qd.filter(|qd| qd.len() == q.len()) {
+            corrected
+                .iter_mut()
+                .zip(qd)
+                .for_each(|(v, d)| *v -= d * self.latency_s);
+        }
+        corrected
+    }
+
+    /// `inspection` with its joints corrected (unchanged when it gives a flange pose).
+    pub fn corrected_inspection(
+        &self,
+        inspection: &Inspection,
+        chain: Option<&Chain>,
+    ) -> Inspection {
+        let mut corrected = inspection.clone();
+        if let (Some(q), Some(chain)) = (&inspection.q, chain)
+            && !self.is_empty()
+        {
+            corrected.q = Some(self.corrected(q, inspection.qd.as_deref(), chain));
+        }
+        corrected
     }
 }
 

@@ -63,6 +63,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             tip_link: "tool0".to_owned(),
             package_dirs: Default::default(),
             kinematics: None,
+            joint_offsets: None,
+            joint_compliance: None,
+            trigger_latency_s: None,
         }),
         tool: ToolSection {
             tcp: pose(&tcp),
@@ -77,6 +80,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
         noise_sigma: Some(0.00005),
         inspections,
+        results: None,
     };
     std::fs::write(
         folder.join("session.json"),

@@ -80,3 +80,141 @@ fn undeclared_ball_radius_is_found_with_the_design_keys() {
     assert!(plot.starts_with("<svg") && plot.contains("modelling probe_radius"));
     let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
+
+fn ips(args: &[&std::ffi::OsStr]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_ips"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// `ips diagnose SESSION --apply OUT --json`, which must succeed.
+fn apply(session: &Path, out: &Path) -> serde_json::Value {
+    let output = ips(&[
+        "diagnose".as_ref(),
+        session.as_os_str(),
+        "--apply".as_ref(),
+        out.as_os_str(),
+        "--json".as_ref(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+fn scratch_folder(name: &str) -> PathBuf {
+    let folder =
+        std::env::temp_dir().join(format!("cobot-align-apply-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&folder).unwrap();
+    folder
+}
+
+/// The shipped session touched with a 3.4 mm ball declared as 3 mm, applied from where it lies
+/// (paths relative to examples/) to a file elsewhere: the radius is corrected, the paths still
+/// resolve, and the corrected session aligns to the diagnosis's pose after modelling with nothing
+/// left to explain.
+#[test]
+fn apply_writes_the_fitted_radius_into_a_session_that_aligns_to_the_pose_after() {
+    let session = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/step_block_ur10/session_probe_radius.json");
+    let out = scratch_folder("radius").join("corrected.json");
+    let applied = apply(&session, &out);
+    assert_eq!(applied["effect"], "probe_radius");
+    let change = &applied["changes"][0];
+    assert_eq!(change["key"], "tool.tip_radius");
+    assert_eq!(change["before"], 0.003);
+    assert!((change["after"].as_f64().unwrap() - 0.0034).abs() < 5e-5);
+    assert!(change["text"].as_str().unwrap().contains(" mm (+0.4"));
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(Path::new(written["part"]["mesh"].as_str().unwrap()).is_absolute());
+    let before = diagnose(&session);
+    let after = diagnose(&out);
+    assert_eq!(after["verdict"], "no_effect", "{after}");
+    for axis in 0..3 {
+        let moved = after["pose_before"]["xyz"][axis].as_f64().unwrap()
+            - before["pose_after"]["xyz"][axis].as_f64().unwrap();
+        assert!(moved.abs() < 1e-5, "axis {axis}: {moved} m");
+    }
+    let _ = std::fs::remove_dir_all(out.parent().unwrap());
+}
+
+/// A session that declares a wrong joint zero (joint 3 off by 1.5 mrad): the diagnosis finds the
+/// offset that cancels it and --apply writes it into robot.joint_offsets, after which nothing is
+/// left. The same for a wrong compliance of joint 2.
+#[test]
+fn apply_corrects_declared_joint_offsets_and_compliance() {
+    let cases = [
+        ("joint_offsets", "robot.joint_offsets[2]", 0.0015, 1e-5),
+        ("joint_compliance", "robot.joint_compliance[1]", -2e-5, 1e-6),
+    ];
+    for (key, changed, wrong, tolerance) in cases {
+        let folder = scratch_folder(key);
+        let mut session: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(scratch_session("session_probe_radius.json")).unwrap(),
+        )
+        .unwrap();
+        session["tool"]["tip_radius"] = serde_json::json!(0.0034);
+        let mut values = vec![0.0; 6];
+        values[if key == "joint_offsets" { 2 } else { 1 }] = wrong;
+        session["robot"][key] = serde_json::json!(values);
+        let path = folder.join("wrong.json");
+        std::fs::write(&path, session.to_string()).unwrap();
+        let applied = apply(&path, &folder.join("fixed.json"));
+        assert_eq!(applied["effect"], key, "{applied}");
+        let change = applied["changes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["key"] == changed)
+            .unwrap_or_else(|| panic!("{applied}"));
+        assert!(
+            change["after"].as_f64().unwrap().abs() < tolerance,
+            "{change}"
+        );
+        assert_eq!(diagnose(&folder.join("fixed.json"))["verdict"], "no_effect");
+        let _ = std::fs::remove_dir_all(folder);
+    }
+}
+
+#[test]
+fn apply_refuses_a_session_with_nothing_to_apply_and_bad_corrections() {
+    let folder = scratch_folder("refused");
+    let refused = |edit: &dyn Fn(&mut serde_json::Value), reason: &str| {
+        let mut session: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(scratch_session("session.json")).unwrap(),
+        )
+        .unwrap();
+        edit(&mut session);
+        let path = folder.join("session.json");
+        std::fs::write(&path, session.to_string()).unwrap();
+        let out = folder.join("out.json");
+        let output = ips(&[
+            "diagnose".as_ref(),
+            path.as_os_str(),
+            "--apply".as_ref(),
+            out.as_os_str(),
+        ]);
+        assert_eq!(output.status.code(), Some(2));
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains(reason), "{stderr}");
+        assert!(!out.exists());
+    };
+    refused(&|_| {}, "nothing applied: the verdict is no_effect");
+    refused(
+        &|s| s["robot"]["joint_offsets"] = serde_json::json!([0.0, 0.1, 0.0, 0.0, 0.0]),
+        "robot.joint_offsets has 5 values, the robot 6 joints",
+    );
+    refused(
+        &|s| s["robot"]["trigger_latency_s"] = serde_json::json!(20.0),
+        "robot.trigger_latency_s = 20 must be finite and within +-1 s (is it in ms?)",
+    );
+    refused(
+        &|s| s["robot"]["joint_compliance"] = serde_json::json!("stiff"),
+        "invalid type: string \"stiff\"",
+    );
+    let _ = std::fs::remove_dir_all(folder);
+}

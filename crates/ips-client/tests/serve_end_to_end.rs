@@ -48,7 +48,7 @@ const DIAGNOSIS_KEYS: [&str; 8] = [
 ];
 
 /// Runs the `ips` binary and parses its one JSON document.
-fn ips(args: &[&str]) -> Value {
+fn ips_text(args: &[&str]) -> String {
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_ips"))
         .args(args)
         .output()
@@ -58,7 +58,11 @@ fn ips(args: &[&str]) -> Value {
         "{args:?}: {}",
         String::from_utf8_lossy(&output.stderr)
     );
-    serde_json::from_slice(&output.stdout).unwrap()
+    String::from_utf8(output.stdout).unwrap()
+}
+
+fn ips(args: &[&str]) -> Value {
+    serde_json::from_str(&ips_text(args)).unwrap()
 }
 
 fn serve(config: &ServeConfig) -> ServeHandle {
@@ -235,6 +239,45 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         json!({"command": "save", "path": saved.to_str().unwrap()}),
     );
     assert_eq!(reply["data"]["inspections"], 9, "{reply}");
+    // The file keeps the last alignment and diagnosis, with the inspections they came from.
+    assert_eq!(reply["data"]["results"], json!(["alignment", "diagnosis"]));
+    let file: Value = serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    assert_eq!(
+        file["results"]["alignment"]["report"]["pose"],
+        aligned["data"]["pose"]
+    );
+    assert_eq!(
+        file["results"]["diagnosis"]["report"]["verdict"],
+        diagnosis["verdict"]
+    );
+    assert_eq!(
+        file["results"]["alignment"]["inspections"]
+            .as_array()
+            .unwrap()
+            .len(),
+        9
+    );
+    // The service's report exports like the offline one: the touches' ball centres included.
+    let csv = ips_text(&[
+        "align",
+        "--service",
+        &service.rep_endpoint,
+        "--export",
+        "csv",
+    ]);
+    assert_eq!(csv.lines().next(), Some("id,x_m,y_m,z_m,residual_m"));
+    assert_eq!(csv.lines().count(), 10, "{csv}");
+    let tf = ips_text(&[
+        "align",
+        "--service",
+        &service.rep_endpoint,
+        "--export",
+        "ros-tf",
+    ]);
+    assert!(
+        tf.contains("--frame-id base_link --child-frame-id part"),
+        "{tf}"
+    );
     // ...and the offline command on the saved session says the same, number for number.
     let offline = ips(&["diagnose", saved.to_str().unwrap(), "--json"]);
     assert_eq!(offline["verdict"], diagnosis["verdict"]);
@@ -269,6 +312,14 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
     // Remove and bad requests.
     let removed = call(&client, json!({"command": "remove", "ids": ["9"]}));
     assert_eq!(removed["data"]["inspections"], 8);
+    // Results of nine inspections no longer describe eight: save leaves them out.
+    let reply = call(
+        &client,
+        json!({"command": "save", "path": saved.to_str().unwrap()}),
+    );
+    assert!(reply["data"].get("results").is_none(), "{reply}");
+    let file: Value = serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    assert!(file.get("results").is_none());
     let unknown = call(&client, json!({"command": "remove", "ids": ["77"]}));
     assert!(
         unknown["reason"].as_str().unwrap().contains("unknown"),

@@ -34,13 +34,19 @@ pub fn diagnose_session(session: &LoadedSession) -> Result<SessionDiagnosis, Bad
         .file
         .inspections
         .iter()
-        .map(|i| match &i.q {
-            Some(q) => Ok(TouchSample::from_joints(
+        .map(|i| match (&i.q, &session.chain) {
+            // The joints as the session's model uses them (its declared corrections applied).
+            (Some(q), Some(chain)) => Ok(TouchSample::from_joints(
+                i.id.clone(),
+                session.corrections.corrected(q, i.qd.as_deref(), chain),
+                i.qd.clone(),
+            )),
+            (Some(q), None) => Ok(TouchSample::from_joints(
                 i.id.clone(),
                 q.clone(),
                 i.qd.clone(),
             )),
-            None => base_from_flange(i, None)
+            (None, _) => base_from_flange(i, None)
                 .map(|pose| TouchSample::from_flange_pose(i.id.clone(), pose)),
         })
         .collect::<Result<Vec<TouchSample>, BadInput>>()?;

@@ -3,6 +3,7 @@
 //! replies.
 
 pub mod align;
+pub mod apply;
 pub mod cloud;
 pub mod diagnose;
 pub mod units;

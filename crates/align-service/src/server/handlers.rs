@@ -9,7 +9,7 @@ use align_core::kinematics::Chain;
 use align_core::tool::Tool;
 use nalgebra::{DVector, Vector3};
 use protocol::reports::{AlignReport, CloudReport, DiagnoseReport};
-use protocol::session::{Inspection, SessionFile};
+use protocol::session::{Inspection, SavedResult, SessionFile, SessionResults};
 use protocol::{
     AlignCloudRequest, Command, GetReply, InspectionCountReply, InspectionsReply, JournalEntry,
     MirroringReply, ProtocolError, RobotSide, SavedReply, ServiceCommand, ServiceReply,
@@ -77,6 +77,9 @@ pub(crate) struct Service {
     pub calibration: Option<Calibration>,
     /// Which kinematics are in use, for `status`; `None` before the bridge was asked.
     pub kinematics_note: Option<String>,
+    /// The last alignment and diagnosis, each with the inspections it used: `save` keeps those
+    /// that still describe the inspections.
+    pub results: SessionResults,
 }
 
 /// A ball farther than this from the nominal part's surface is named in the `get` reply: a
@@ -187,6 +190,21 @@ impl Service {
     fn session_file(&self) -> SessionFile {
         let mut file = self.template.clone();
         file.inspections = self.inspections.clone();
+        let ids = self.inspection_ids();
+        let results = SessionResults {
+            alignment: self
+                .results
+                .alignment
+                .clone()
+                .filter(|saved| saved.inspections == ids),
+            diagnosis: self
+                .results
+                .diagnosis
+                .clone()
+                .filter(|saved| saved.inspections == ids),
+        };
+        file.results =
+            (results.alignment.is_some() || results.diagnosis.is_some()).then_some(results);
         // The controller's calibration, when one is in use, travels with the touches it made.
         if let (Some(robot), Some(calibration)) = (&mut file.robot, &self.calibration) {
             robot.kinematics = Some(calibration.to_kinematics());
@@ -416,10 +434,19 @@ impl Service {
         Ok(LoadedSession::resolve(self.session_file(), &self.folder)?)
     }
 
-    fn align(&self) -> Handled<AlignReport> {
+    fn inspection_ids(&self) -> Vec<String> {
+        self.inspections.iter().map(|i| i.id.clone()).collect()
+    }
+
+    fn align(&mut self) -> Handled<AlignReport> {
         let session = self.loaded_session()?;
         let result = align::align_session(&session, align::AlignChoices::default())?;
-        Ok(align::report(&session, &result))
+        let report = align::report(&session, &result);
+        self.results.alignment = Some(SavedResult {
+            inspections: self.inspection_ids(),
+            report: report.clone(),
+        });
+        Ok(report)
     }
 
     fn align_cloud(&self, request: &AlignCloudRequest) -> Handled<CloudReport> {
@@ -433,9 +460,14 @@ impl Service {
         Ok(cloud::align(&job)?)
     }
 
-    fn diagnose(&self) -> Handled<DiagnoseReport> {
+    fn diagnose(&mut self) -> Handled<DiagnoseReport> {
         let session = self.loaded_session()?;
-        Ok(diagnose::diagnose_session(&session)?.report(None))
+        let report = diagnose::diagnose_session(&session)?.report(None);
+        self.results.diagnosis = Some(SavedResult {
+            inspections: self.inspection_ids(),
+            report: report.clone(),
+        });
+        Ok(report)
     }
 
     fn save(&self, path: String) -> Handled<SavedReply> {
@@ -460,9 +492,18 @@ impl Service {
             .map_err(|e| RequestError::Refused(e.to_string()))?;
         let target = self.files.writable(&path)?;
         std::fs::write(&target, text + "\n").map_err(|e| format!("cannot write '{path}': {e}"))?;
+        let results = file.results.as_ref();
         Ok(SavedReply {
             inspections: file.inspections.len(),
             path,
+            results: [
+                ("alignment", results.is_some_and(|r| r.alignment.is_some())),
+                ("diagnosis", results.is_some_and(|r| r.diagnosis.is_some())),
+            ]
+            .into_iter()
+            .filter(|(_, kept)| *kept)
+            .map(|(name, _)| name.to_owned())
+            .collect(),
         })
     }
 

@@ -235,6 +235,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         }));
     }
     let mut service = handlers::Service {
+        results: template.results.clone().unwrap_or_default(),
         template,
         folder,
         inspections,

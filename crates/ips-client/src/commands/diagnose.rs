@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 use align_core::diagnosis::{Diagnosis, TouchSample};
 use align_core::io::export::ExportFormat;
 use align_core::pose::isometry_from_xyz_rpy;
+use align_service::jobs::apply::apply_effect;
 use align_service::jobs::diagnose::diagnose_session;
 use align_service::session::LoadedSession;
-use protocol::reports::DiagnoseReport;
+use protocol::reports::{AppliedReport, DiagnoseReport};
 use protocol::{Pose, ServiceCommand};
 
 use crate::{BadInput, CliError, client, json_line};
@@ -37,10 +38,24 @@ pub struct DiagnoseArgs {
     pub json: bool,
     #[arg(long, value_name = "FORMAT", value_parser = crate::export::parse_format, help = crate::export::HELP)]
     pub export: Option<ExportFormat>,
+    /// Write the session with the diagnosed effect applied to its model (ball radius, TCP,
+    /// part scale, joint offsets, joint compliance or capture latency) to OUT and print what
+    /// changed; refused unless the verdict is "effect". Aligning OUT gives the pose after
+    /// modelling.
+    #[arg(long, value_name = "OUT", conflicts_with_all = ["service", "export"])]
+    pub apply: Option<PathBuf>,
 }
 
 /// The command: the SESSION file diagnosed here, or the service `--service` names asked.
 pub fn run(args: &DiagnoseArgs) -> Result<String, CliError> {
+    if let (Some(out), Some(session)) = (&args.apply, &args.session) {
+        let applied = apply(session, out)?;
+        return if args.json {
+            json_line(&applied)
+        } else {
+            Ok(applied_text(&applied))
+        };
+    }
     let report = match (&args.service, &args.session) {
         (Some(endpoint), _) => client::request(endpoint, ServiceCommand::Diagnose)?,
         (None, Some(session)) => run_file(session)?,
@@ -77,6 +92,75 @@ pub fn run_file(path: &Path) -> Result<DiagnoseReport, CliError> {
         CliError::Failure(format!("cannot write '{}': {error}", plot.display()))
     })?;
     Ok(diagnosed.report(Some(plot.display().to_string())))
+}
+
+/// `--apply OUT`: diagnoses SESSION, writes it to OUT with the effect in its model.
+fn apply(session_path: &Path, out: &Path) -> Result<AppliedReport, CliError> {
+    let session = LoadedSession::load(session_path)?;
+    let report = diagnose_session(&session)?.report(None);
+    let effect = match (&report.effect, report.verdict.as_str()) {
+        (Some(effect), "effect") => effect,
+        (_, verdict) => {
+            return Err(BadInput(format!(
+                "nothing applied: the verdict is {verdict} ({})",
+                report.explanation
+            ))
+            .into());
+        }
+    };
+    let dof = session.chain.as_ref().map_or(0, |chain| chain.dof());
+    let (mut file, changes) = apply_effect(&session.file, effect, dof)?;
+    rebase_paths(&mut file, session_path, out);
+    let text = serde_json::to_string_pretty(&file)
+        .map_err(|error| CliError::Failure(format!("cannot encode the session: {error}")))?;
+    std::fs::write(out, text + "\n")
+        .map_err(|error| CliError::Failure(format!("cannot write '{}': {error}", out.display())))?;
+    Ok(AppliedReport {
+        path: out.display().to_string(),
+        effect: effect.name.clone(),
+        changes,
+        rms_before: report.before.rms,
+        rms_after: report.after.rms,
+    })
+}
+
+/// The session's paths (relative to the file they were in) made absolute when the new file
+/// lands in another folder, so that it finds the same robot and part.
+fn rebase_paths(file: &mut protocol::session::SessionFile, from: &Path, to: &Path) {
+    let folder = |path: &Path| {
+        let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+        std::path::absolute(parent.unwrap_or(Path::new("."))).ok()
+    };
+    let (Some(source), target) = (folder(from), folder(to)) else {
+        return;
+    };
+    if target.as_ref() == Some(&source) {
+        return;
+    }
+    let absolute = |relative: &mut String| {
+        if Path::new(relative.as_str()).is_relative() {
+            *relative = source.join(relative.as_str()).display().to_string();
+        }
+    };
+    absolute(&mut file.part.mesh);
+    if let Some(robot) = &mut file.robot {
+        absolute(&mut robot.urdf);
+        robot.package_dirs.values_mut().for_each(absolute);
+    }
+}
+
+fn applied_text(applied: &AppliedReport) -> String {
+    let mut text = format!(
+        "applied {} to the model and wrote {} (residual rms {:.4} mm before, {:.4} mm after):\n",
+        applied.effect,
+        applied.path,
+        applied.rms_before * 1e3,
+        applied.rms_after * 1e3
+    );
+    for change in &applied.changes {
+        text += &format!("  {}\n", change.text);
+    }
+    text
 }
 
 /// Height of the scatter panel under the bars, px.

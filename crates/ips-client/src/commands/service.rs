@@ -108,12 +108,16 @@ pub fn status(args: &ServiceArgs) -> Result<String, CliError> {
         let age = reply
             .sample_age_s
             .map_or("none yet".to_owned(), |age| format!("{age:.3} s"));
-        format!(
+        let mut text = format!(
             "mirroring: {}, inspections: {}, latest joint state: {age}{}\n",
             reply.mirroring,
             reply.inspections,
             if reply.stale { " (stale)" } else { "" }
-        )
+        );
+        if let Some(kinematics) = &reply.kinematics {
+            text += &format!("kinematics: {kinematics}\n");
+        }
+        text
     })
 }
 
@@ -176,8 +180,13 @@ pub fn save(args: &PathArgs) -> Result<String, CliError> {
         path: args.path.clone(),
     });
     call(&args.service, command, |reply: &SavedReply| {
+        let results = if reply.results.is_empty() {
+            String::new()
+        } else {
+            format!(" with the last {}", reply.results.join(" and "))
+        };
         format!(
-            "saved {} inspections to {}\n",
+            "saved {} inspections{results} to {}\n",
             reply.inspections, reply.path
         )
     })

@@ -120,6 +120,9 @@ impl Scene {
                 tip_link: robot.flange_link().to_owned(),
                 package_dirs: Default::default(),
                 kinematics: None,
+                joint_offsets: None,
+                joint_compliance: None,
+                trigger_latency_s: None,
             }),
             tool: ToolSection {
                 tcp: pose(&tcp),
@@ -134,6 +137,7 @@ impl Scene {
             },
             noise_sigma: Some(0.00005),
             inspections: Vec::new(),
+            results: None,
         };
         // The cell as it physically is; the session above declares the nominal tool and part.
         let mut true_tcp = tcp;
