@@ -39,6 +39,7 @@ impl Fixture {
             max_sample_age_s: 0.1,
             max_tool_speed_m_s: 0.005,
             data_dirs: vec![folder.clone()],
+            keep_session_inspections: true,
         })
         .unwrap();
         let context = zmq::Context::new();
@@ -217,4 +218,77 @@ fn raw_tcp_garbage_and_multipart_requests_do_not_stop_the_service() {
     assert!(why.contains("multipart request of 2 frames"), "{why}");
     assert_eq!(fixture.call(json!({"command": "status"}))["ok"], true);
     fixture.finish();
+}
+
+/// A session file that already holds inspections: a new journal keeps them (and the start-up
+/// note says so) unless told to drop them; an existing journal wins, and the note says that the
+/// file's are not used.
+#[test]
+fn the_session_files_inspections_are_kept_or_dropped_and_the_start_says_which() {
+    let folder = std::env::temp_dir().join(format!(
+        "cobot-align-requests-session-inspections-{}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&folder);
+    std::fs::create_dir_all(&folder).unwrap();
+    let config = |keep: bool| Config {
+        session: example("session.json"),
+        journal: folder.join("inspections.journal"),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        bridge_rep: "tcp://127.0.0.1:1".to_owned(),
+        bridge_pub: "tcp://127.0.0.1:1".to_owned(),
+        max_sample_age_s: 0.1,
+        max_tool_speed_m_s: 0.005,
+        data_dirs: vec![folder.clone()],
+        keep_session_inspections: keep,
+    };
+    let count = |service: &Handle| {
+        let context = zmq::Context::new();
+        let socket = context.socket(zmq::REQ).unwrap();
+        socket.set_linger(0).unwrap();
+        socket.set_rcvtimeo(10_000).unwrap();
+        socket.connect(&service.rep_endpoint).unwrap();
+        let request = json!({"header": {"from": "ips", "to": "align", "type": "request"},
+                             "body": {"command": "status"}});
+        socket.send(request.to_string().as_bytes(), 0).unwrap();
+        let reply: Value = serde_json::from_slice(&socket.recv_bytes(0).unwrap()).unwrap();
+        reply["body"]["data"]["inspections"].as_u64().unwrap()
+    };
+    let dropped = start(&config(false)).unwrap();
+    assert_eq!(count(&dropped), 0);
+    assert!(
+        dropped
+            .inspections_note
+            .contains("the session file's 9 inspection(s) are not used"),
+        "{}",
+        dropped.inspections_note
+    );
+    dropped.stop();
+    // The journal of that run exists now (empty): it continues, with the file's left out.
+    let continued = start(&config(true)).unwrap();
+    assert_eq!(count(&continued), 0);
+    assert!(
+        continued
+            .inspections_note
+            .contains("0 inspection(s) replayed from the journal"),
+        "{}",
+        continued.inspections_note
+    );
+    assert!(
+        continued
+            .inspections_note
+            .contains("the session file's 9 are not used")
+    );
+    continued.stop();
+    std::fs::remove_file(folder.join("inspections.journal")).unwrap();
+    let kept = start(&config(true)).unwrap();
+    assert_eq!(count(&kept), 9);
+    assert!(
+        kept.inspections_note
+            .contains("9 inspection(s) from the session file start the list"),
+        "{}",
+        kept.inspections_note
+    );
+    kept.stop();
+    let _ = std::fs::remove_dir_all(&folder);
 }

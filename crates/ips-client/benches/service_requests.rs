@@ -191,6 +191,7 @@ fn main() {
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
+        keep_session_inspections: true,
     })
     .expect("service starts");
     let client = socket(&context, zmq::REQ);

@@ -70,12 +70,17 @@ pub fn display_round(value: f64, decimals: i32) -> f64 {
     (value * scale).round() / scale + 0.0
 }
 
-/// `NAME: xyz [m] X Y Z, rpy [rad] R P Y` with a newline, six decimals, no negative zeros: how
-/// every alignment's text starts.
+/// `NAME: xyz [m] X Y Z, rpy [rad] R P Y` with a newline, six decimals, no negative zeros, and
+/// under it the same in mm and degrees: how every alignment's text starts.
 pub fn pose_line(name: &str, pose: &protocol::Pose) -> String {
     let [x, y, z] = pose.xyz.map(|v| display_round(v, 6));
     let [roll, pitch, yaw] = pose.rpy.map(|v| display_round(v, 6));
-    format!("{name}: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n")
+    let [x_mm, y_mm, z_mm] = pose.xyz.map(|v| display_round(v * 1e3, 3));
+    let [roll_deg, pitch_deg, yaw_deg] = pose.rpy.map(|v| display_round(v.to_degrees(), 4));
+    format!(
+        "{name}: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n  \
+         = xyz [mm] {x_mm:.3} {y_mm:.3} {z_mm:.3}, rpy [deg] {roll_deg:.4} {pitch_deg:.4} {yaw_deg:.4}\n"
+    )
 }
 
 /// One JSON document on one line, as every `--json` prints.

@@ -7,6 +7,7 @@ use protocol::reports::{AppliedChange, EffectFit};
 use protocol::session::SessionFile;
 
 use crate::BadInput;
+use crate::jobs::units::person_unit;
 
 /// Where a fitted parameter goes in the session file.
 enum Target {
@@ -48,25 +49,19 @@ fn target(name: &str, dof: usize) -> Result<Target, BadInput> {
     })
 }
 
-/// How a change reads for a person, in the unit people think in.
-fn describe(key: &str, before: f64, after: f64, unit: &str) -> String {
-    let (factor, shown, decimals) = match unit {
-        "m" => (1e3, "mm", 4),
-        "rad" => (1e3, "mrad", 4),
-        "rad/(N m)" => (1e6, "urad/(N m)", 3),
-        "s" => (1e3, "ms", 3),
-        _ => (1.0, unit, 9),
-    };
+/// How a change reads for a person, in the unit people think in for `parameter`.
+fn describe(key: &str, parameter: &str, before: f64, after: f64) -> String {
+    let (factor, unit, decimals) = person_unit(parameter);
     let (b, a) = (before * factor, after * factor);
     format!(
-        "{key}: {b:.decimals$} -> {a:.decimals$} {shown} ({:+.decimals$} {shown})",
+        "{key}: {b:.decimals$} -> {a:.decimals$} {unit} ({:+.decimals$} {unit})",
         a - b
     )
 }
 
-fn change(key: String, before: f64, after: f64, unit: &str) -> AppliedChange {
+fn change(key: String, parameter: &str, before: f64, after: f64, unit: &str) -> AppliedChange {
     AppliedChange {
-        text: describe(&key, before, after, unit),
+        text: describe(&key, parameter, before, after),
         key,
         before,
         after,
@@ -99,19 +94,26 @@ pub fn apply_effect(
                     )));
                 }
                 out.tool.tip_radius = after;
-                changes.push(change("tool.tip_radius".to_owned(), before, after, "m"));
+                changes.push(change(
+                    "tool.tip_radius".to_owned(),
+                    name,
+                    before,
+                    after,
+                    "m",
+                ));
             }
             Target::Tcp(axis) => {
                 let before = out.tool.tcp.xyz[axis];
                 out.tool.tcp.xyz[axis] += value;
                 let key = format!("tool.tcp.xyz[{axis}]");
-                changes.push(change(key, before, out.tool.tcp.xyz[axis], "m"));
+                changes.push(change(key, name, before, out.tool.tcp.xyz[axis], "m"));
             }
             Target::MeshScale => {
                 let before = out.part.mesh_scale;
                 out.part.mesh_scale *= 1.0 + value;
                 let mut applied = change(
                     "part.mesh_scale".to_owned(),
+                    name,
                     before,
                     out.part.mesh_scale,
                     "",
@@ -143,6 +145,7 @@ pub fn apply_effect(
                 values[joint] += value;
                 changes.push(change(
                     format!("{key}[{joint}]"),
+                    name,
                     before,
                     values[joint],
                     unit,
@@ -156,6 +159,7 @@ pub fn apply_effect(
                 robot.trigger_latency_s = Some(before + value);
                 changes.push(change(
                     "robot.trigger_latency_s".to_owned(),
+                    name,
                     before,
                     before + value,
                     "s",

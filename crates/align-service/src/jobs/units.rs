@@ -140,3 +140,45 @@ mod tests {
         assert_eq!(extent_m(&[]), 0.0);
     }
 }
+
+/// The unit a person reads an effect parameter in, from the unit its name ends in: the factor
+/// from the SI value, the unit's name and the decimals worth printing (m -> mm, rad -> mrad,
+/// rad/(N m) -> urad/(N m), s -> ms, a scale's deviation from one -> %).
+pub fn person_unit(parameter: &str) -> (f64, &'static str, usize) {
+    if parameter.ends_with("_rad_per_nm") {
+        (1e6, "urad/(N m)", 3)
+    } else if parameter.ends_with("_rad") {
+        (1e3, "mrad", 4)
+    } else if parameter.ends_with("_m") {
+        (1e3, "mm", 4)
+    } else if parameter.ends_with("_s") {
+        (1e3, "ms", 3)
+    } else if parameter == "scale_minus_one" {
+        (1e2, "%", 4)
+    } else {
+        (1.0, "", 9)
+    }
+}
+
+/// `value` of `parameter` in the unit a person reads it in, e.g. `+0.4000 mm`.
+pub fn in_person_units(parameter: &str, value: f64) -> String {
+    let (factor, unit, decimals) = person_unit(parameter);
+    format!("{:+.decimals$} {unit}", value * factor)
+}
+
+#[cfg(test)]
+mod person_unit_tests {
+    use super::in_person_units;
+
+    #[test]
+    fn effect_parameters_read_in_the_units_people_use() {
+        assert_eq!(in_person_units("delta_radius_m", 0.0004), "+0.4000 mm");
+        assert_eq!(in_person_units("joint_3_rad", -0.0015), "-1.5000 mrad");
+        assert_eq!(
+            in_person_units("joint_2_rad_per_nm", 2e-6),
+            "+2.000 urad/(N m)"
+        );
+        assert_eq!(in_person_units("latency_s", 0.008), "+8.000 ms");
+        assert_eq!(in_person_units("scale_minus_one", 0.0012), "+0.1200 %");
+    }
+}

@@ -61,6 +61,9 @@ pub struct Config {
     /// The only directories whose regular files `load`, `save` and `align-cloud` may name;
     /// empty means the session file's folder.
     pub data_dirs: Vec<PathBuf>,
+    /// Whether the session file's inspections start a new journal's list (true) or it starts
+    /// empty; an existing journal's list wins either way.
+    pub keep_session_inspections: bool,
 }
 
 /// Why the service could not start.
@@ -87,6 +90,9 @@ pub struct Handle {
     pub rep_endpoint: String,
     /// What replaying the journal found: entries, corrupt lines skipped, a torn tail cut off.
     pub journal_report: JournalReport,
+    /// Where the inspection list came from, for the start-up log: the session file, the journal,
+    /// or neither.
+    pub inspections_note: String,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
 }
@@ -190,11 +196,39 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         .as_ref()
         .map(|replayed| replayed.report.clone())
         .unwrap_or_default();
-    let (inspections, highest_id) = match replayed {
-        Some(replayed) => (replayed.inspections, replayed.highest_id),
+    let in_file = template.inspections.len();
+    let (inspections, highest_id, inspections_note) = match replayed {
+        Some(replayed) => {
+            let note = format!(
+                "{} inspection(s) replayed from the journal '{}'{}",
+                replayed.inspections.len(),
+                config.journal.display(),
+                if in_file > 0 {
+                    format!(
+                        " (the session file's {in_file} are not used: the journal continues an earlier run; remove it to start from the file)"
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            (replayed.inspections, replayed.highest_id, note)
+        }
         None => {
-            // A new journal starts with the session file's inspections.
-            let inspections = template.inspections.clone();
+            // A new journal starts with the session file's inspections, unless told otherwise.
+            let inspections = if config.keep_session_inspections {
+                template.inspections.clone()
+            } else {
+                Vec::new()
+            };
+            let note = match (in_file, config.keep_session_inspections) {
+                (0, _) => "no inspections yet (a new journal)".to_owned(),
+                (n, true) => format!(
+                    "{n} inspection(s) from the session file start the list (--session-inspections drop starts empty)"
+                ),
+                (n, false) => format!(
+                    "the session file's {n} inspection(s) are not used: the list starts empty"
+                ),
+            };
             for inspection in &inspections {
                 journal
                     .append(&protocol::JournalEntry::Add {
@@ -206,7 +240,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
                     })?;
             }
             let highest = journal::highest_id(&inspections);
-            (inspections, highest)
+            (inspections, highest, note)
         }
     };
     let context = zmq::Context::new();
@@ -265,6 +299,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     Ok(Handle {
         rep_endpoint,
         journal_report,
+        inspections_note,
         stop,
         threads,
     })

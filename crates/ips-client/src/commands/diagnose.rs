@@ -10,6 +10,7 @@ use align_core::io::export::ExportFormat;
 use align_core::pose::isometry_from_xyz_rpy;
 use align_service::jobs::apply::apply_effect;
 use align_service::jobs::diagnose::diagnose_session;
+use align_service::jobs::units::person_unit;
 use align_service::session::LoadedSession;
 use protocol::reports::{AppliedReport, DiagnoseReport};
 use protocol::{Pose, ServiceCommand};
@@ -293,7 +294,12 @@ pub fn to_text(report: &DiagnoseReport) -> String {
         text += &format!("effect: {}\n", effect.name);
         for (key, value) in &effect.params {
             let stderr = effect.stderr.get(key).copied().unwrap_or(f64::NAN);
-            text += &format!("  {key} = {value:.6e} +- {stderr:.1e}\n");
+            let (factor, unit, decimals) = person_unit(key);
+            text += &format!(
+                "  {key} = {:+.decimals$} {unit} +- {:.decimals$} {unit}\n",
+                value * factor,
+                stderr * factor
+            );
         }
     }
     let (before, after) = (&report.before, &report.after);

@@ -34,6 +34,18 @@ pub struct ServeArgs {
     /// repeatable. Without it, only the session file's folder.
     #[arg(long = "data-dir", value_name = "DIR")]
     pub data_dirs: Vec<PathBuf>,
+    /// What a new journal starts with when the session file holds inspections: keep them, or
+    /// drop them and start empty. An existing journal continues its own list either way (the
+    /// start-up log says which list is in use).
+    #[arg(long, value_enum, value_name = "WHAT", default_value_t = SessionInspections::Keep)]
+    pub session_inspections: SessionInspections,
+}
+
+/// `--session-inspections`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SessionInspections {
+    Keep,
+    Drop,
 }
 
 impl ServeArgs {
@@ -47,6 +59,7 @@ impl ServeArgs {
             max_sample_age_s: self.max_sample_age,
             max_tool_speed_m_s: self.max_tool_speed,
             data_dirs: self.data_dirs.clone(),
+            keep_session_inspections: self.session_inspections == SessionInspections::Keep,
         }
     }
 }
@@ -62,6 +75,7 @@ pub fn run(args: &ServeArgs) -> Result<String, CliError> {
             for warning in service.journal_report.warnings() {
                 tracing::warn!("{warning}");
             }
+            tracing::info!("{}", service.inspections_note);
             println!("READY rep={}", service.rep_endpoint);
         },
         || {
