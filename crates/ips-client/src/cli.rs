@@ -41,6 +41,12 @@ pub enum Command {
         after_help = "Examples:\n  ips trials --trials 50 --deltas 50,100,200,500,1000 > docs/psa-trials.md\n  ips trials --robot ur10 --deltas 500 --hierarchical-only\n  ips trials --urdf my_robot.urdf --package-dir my_robot_support=/opt/my_robot_support \\\n      --home 0,0.3,-0.2,0,0.6,0 --deltas 50,100 --trials 10 --hierarchical-only"
     )]
     Trials(commands::trials::TrialsArgs),
+    /// Where to touch: the 3-2-1 plan for the session's part at its nominal pose (points and
+    /// approach directions in the base frame, joint targets for the session's robot).
+    #[command(
+        after_help = "Examples:\n  ips plan examples/step_block_ur10/session.json\n  ips plan examples/step_block_ur10/session.json --touches 12 --vary-tilt --json"
+    )]
+    Plan(commands::plan::PlanArgs),
     /// Point Set Alignment: move the session's part until it matches its inspections.
     #[command(
         after_help = "Examples:\n  ips align examples/step_block_ur10/session.json --json\n  ips align --service tcp://127.0.0.1:4000      (the running service's inspections)"

@@ -220,7 +220,8 @@ fn tcp_frame(centre: &Point3<f64>, probe: &Vector3<f64>, spin: f64) -> Isometry3
 const MAX_TRIES_PER_TOUCH: usize = 12;
 
 struct Reach<'a> {
-    chain: &'a Chain,
+    /// `None` plans where to touch without asking whether a robot reaches it.
+    chain: Option<&'a Chain>,
     base_from_part: Isometry3<f64>,
     flange_from_tcp: Isometry3<f64>,
     radius: f64,
@@ -274,21 +275,27 @@ impl Reach<'_> {
                 continue;
             }
             let contact_centre = self.base_from_part * (surface + normal * self.radius);
+            let Some(chain) = self.chain else {
+                return Some(TouchPlan {
+                    point_in_part: *point,
+                    normal_in_part: *normal,
+                    tilt_rad: tilt,
+                    q_contact: Vec::new(),
+                    q_approach: Vec::new(),
+                    face,
+                });
+            };
             for spin in [0.0, 1.5, 3.0, -1.5] {
                 let contact = tcp_frame(&contact_centre, &probe, spin);
-                let Ok(at_contact) = self.chain.inverse(
-                    &(contact * self.flange_from_tcp.inverse()),
-                    &self.seed,
-                    &ik,
-                ) else {
+                let Ok(at_contact) =
+                    chain.inverse(&(contact * self.flange_from_tcp.inverse()), &self.seed, &ik)
+                else {
                     continue;
                 };
                 let back = Translation3::from(-probe * self.options.approach_m) * contact;
-                let Ok(at_approach) = self.chain.inverse(
-                    &(back * self.flange_from_tcp.inverse()),
-                    &at_contact.q,
-                    &ik,
-                ) else {
+                let Ok(at_approach) =
+                    chain.inverse(&(back * self.flange_from_tcp.inverse()), &at_contact.q, &ik)
+                else {
                     continue;
                 };
                 return Some(TouchPlan {
@@ -369,18 +376,49 @@ pub fn plan_touches(
     seed: &[f64],
     options: &PlanOptions,
 ) -> Result<Vec<TouchPlan>, PlanError> {
+    plan(
+        mesh,
+        base_from_part,
+        Some((chain, flange_from_tcp, seed)),
+        tip_radius_m,
+        part_scale,
+        options,
+    )
+}
+
+/// Plans where to touch `mesh` standing at `base_from_part` with a ball of `tip_radius_m`, for
+/// no robot in particular: the same 3-2-1 choice of faces and points, approachable by the probe
+/// (tilted where the normal is blocked, never from below), without the reachability check. Each
+/// touch's joints are empty.
+pub fn plan_touch_points(
+    mesh: &Mesh,
+    base_from_part: &Isometry3<f64>,
+    tip_radius_m: f64,
+    options: &PlanOptions,
+) -> Result<Vec<TouchPlan>, PlanError> {
+    plan(mesh, base_from_part, None, tip_radius_m, 1.0, options)
+}
+
+fn plan(
+    mesh: &Mesh,
+    base_from_part: &Isometry3<f64>,
+    robot: Option<(&Chain, &Isometry3<f64>, &[f64])>,
+    tip_radius_m: f64,
+    part_scale: f64,
+    options: &PlanOptions,
+) -> Result<Vec<TouchPlan>, PlanError> {
     if options.touches < 6 {
         return Err(PlanError::TooFewTouches(options.touches));
     }
     let reach = Reach {
-        chain,
+        chain: robot.map(|(chain, _, _)| chain),
         base_from_part: *base_from_part,
-        flange_from_tcp: *flange_from_tcp,
+        flange_from_tcp: robot.map_or(Isometry3::identity(), |(_, tcp, _)| *tcp),
         radius: tip_radius_m,
         part_scale,
         options,
         mesh,
-        seed: seed.to_vec(),
+        seed: robot.map_or(Vec::new(), |(_, _, seed)| seed.to_vec()),
     };
     let faces = planar_faces(mesh);
     let points: Vec<Vec<Point3<f64>>> = faces

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use ips_client::cli::{Cli, Command};
 use ips_client::commands::{
-    align, align_cloud, align_robot, demo, diagnose, fk, kinematics, serve, service, trials,
+    align, align_cloud, align_robot, demo, diagnose, fk, kinematics, plan, serve, service, trials,
 };
 use ips_client::{BadInput, CliError};
 
@@ -49,6 +49,7 @@ fn run(command: Command) -> Result<String, CliError> {
         Command::Status(args) => service::status(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
+        Command::Plan(args) => plan::run(&args),
     }
 }
 

@@ -8,6 +8,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod fk;
 pub mod kinematics;
+pub mod plan;
 pub mod serve;
 pub mod service;
 pub mod trials;
