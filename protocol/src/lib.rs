@@ -38,8 +38,9 @@ pub use journal::JournalEntry;
 pub use pose::Pose;
 pub use service::{
     AlignCloudRequest, GetReply, GetRequest, InspectionCountReply, InspectionsReply,
-    MAX_SERVICE_REQUEST_BYTES, MirroringReply, PathRequest, RemoveRequest, ReplyError, SERVICE,
-    SavedReply, ServiceCommand, ServiceReply, ServiceReplyBody, ServiceRequest, StatusReply,
-    parse_service_request, service_reply_error, service_reply_ok, service_request,
+    MAX_SERVICE_REQUEST_BYTES, MirroringReply, NextTouchHint, PathRequest, RemoveRequest,
+    ReplyError, SERVICE, SavedReply, ServiceCommand, ServiceReply, ServiceReplyBody,
+    ServiceRequest, StatusReply, parse_service_request, service_reply_error, service_reply_ok,
+    service_request,
 };
 pub use session::{Inspection, SessionFile};

@@ -333,6 +333,28 @@ pub struct GetReply {
     /// A warning about the touch, e.g. a ball far from the nominal part.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// Outward normal of the nominal part's surface nearest the ball (base frame): which face
+    /// the touch was on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal_surface_normal: Option<[f64; 3]>,
+    /// Where to touch next to learn the most about the part's pose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub next_touch: Option<NextTouchHint>,
+}
+
+/// A suggested next touch on the part at its nominal pose, base frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NextTouchHint {
+    /// The surface point to touch, mm.
+    pub point_mm: [f64; 3],
+    /// Outward normal of the surface there.
+    pub normal: [f64; 3],
+    /// Direction to move the probe in (into the surface), unit vector.
+    pub approach: [f64; 3],
+    /// Tilt of that direction from the inward normal, degrees (0 = head-on).
+    pub tilt_deg: f64,
+    /// Why this touch.
+    pub reason: String,
 }
 
 /// `start` and `stop`.

@@ -12,6 +12,7 @@
 pub mod corpus;
 pub mod diagnosis;
 pub mod geometry;
+pub mod guidance;
 pub mod io;
 pub mod kinematics;
 pub mod pose;

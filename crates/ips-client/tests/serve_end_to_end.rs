@@ -203,6 +203,16 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
             distance.abs() > 50.0,
             "{got}"
         );
+        // ...and where to touch next: on the nominal part, with the reason.
+        let next = &got["data"]["next_touch"];
+        assert!(
+            next["reason"].as_str().unwrap().contains("direction"),
+            "{got}"
+        );
+        let normal: [f64; 3] = serde_json::from_value(next["normal"].clone()).unwrap();
+        let approach: [f64; 3] = serde_json::from_value(next["approach"].clone()).unwrap();
+        let dot: f64 = normal.iter().zip(&approach).map(|(n, a)| n * a).sum();
+        assert!(dot < -0.8, "the approach goes into the surface: {got}");
     }
     let listed = call(&client, json!({"command": "list"}));
     assert_eq!(listed["data"]["inspections"].as_array().unwrap().len(), 9);

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use align_core::guidance::{self, TakenTouch};
 use align_core::kinematics::Chain;
 use align_core::tool::Tool;
 use nalgebra::{DVector, Vector3};
@@ -12,8 +13,8 @@ use protocol::reports::{AlignReport, CloudReport, DiagnoseReport};
 use protocol::session::{Inspection, SavedResult, SessionFile, SessionResults};
 use protocol::{
     AlignCloudRequest, Command, GetReply, InspectionCountReply, InspectionsReply, JournalEntry,
-    MirroringReply, ProtocolError, RobotSide, SavedReply, ServiceCommand, ServiceReply,
-    StatusReply,
+    MirroringReply, NextTouchHint, ProtocolError, RobotSide, SavedReply, ServiceCommand,
+    ServiceReply, StatusReply,
 };
 use reply_socket::{ReplySocket, Wait};
 use serde::Serialize;
@@ -80,6 +81,8 @@ pub(crate) struct Service {
     /// The last alignment and diagnosis, each with the inspections it used: `save` keeps those
     /// that still describe the inspections.
     pub results: SessionResults,
+    /// Places on the nominal part a next touch may go, drawn at the first `get`.
+    pub touch_candidates: std::sync::OnceLock<Vec<guidance::Candidate>>,
 }
 
 /// A ball farther than this from the nominal part's surface is named in the `get` reply: a
@@ -354,12 +357,15 @@ impl Service {
     /// The reply to `get`: the inspection, its ball centre, and how far that is from the part's
     /// surface at the nominal pose, with a warning when it is too far to be a touch of it.
     fn where_the_ball_is(&self, inspection: Inspection) -> GetReply {
+        let next_touch = self.next_touch();
         let Some(q) = &inspection.q else {
             return GetReply {
                 inspection,
                 ball_centre_mm: None,
                 nominal_surface_distance_mm: None,
                 note: None,
+                nominal_surface_normal: None,
+                next_touch,
             };
         };
         let centre = self
@@ -368,8 +374,9 @@ impl Service {
             .translation
             .vector;
         let in_part = self.base_from_part_nominal.inverse() * nalgebra::Point3::from(centre);
-        let distance_m =
-            self.part_mesh.signed_closest(&in_part).signed_distance_m - self.tool.tip_radius_m;
+        let surface = self.part_mesh.closest_point(&in_part);
+        let distance_m = surface.signed_distance - self.tool.tip_radius_m;
+        let normal = self.base_from_part_nominal.rotation * surface.normal;
         let note = (distance_m.abs() > FAR_FROM_NOMINAL_M).then(|| {
             format!(
                 "the ball is {:.1} mm from the nominal part's surface: probably not a touch of this part, or the nominal pose is that far off",
@@ -381,7 +388,47 @@ impl Service {
             ball_centre_mm: Some([centre.x * 1e3, centre.y * 1e3, centre.z * 1e3]),
             nominal_surface_distance_mm: Some(distance_m * 1e3),
             note,
+            nominal_surface_normal: Some([normal.x, normal.y, normal.z]),
+            next_touch,
         }
+    }
+
+    /// The touch that would add the most to what the inspections so far say about the part's
+    /// pose, on the part at its nominal pose ([`align_core::guidance`]).
+    fn next_touch(&self) -> Option<NextTouchHint> {
+        let candidates = self.touch_candidates.get_or_init(|| {
+            guidance::candidates(
+                &self.part_mesh,
+                &self.base_from_part_nominal,
+                self.tool.tip_radius_m,
+            )
+        });
+        let taken: Vec<TakenTouch> = self
+            .inspections
+            .iter()
+            .filter_map(|inspection| {
+                let q = inspection.q.as_ref()?;
+                let tcp = self.tool.base_from_tcp(&self.chain.forward_unchecked(q));
+                Some(TakenTouch {
+                    ball_centre: nalgebra::Point3::from(tcp.translation.vector),
+                    approach: Some(tcp.rotation * Vector3::z()),
+                })
+            })
+            .collect();
+        let next = guidance::next_touch(
+            &self.part_mesh,
+            &self.base_from_part_nominal,
+            candidates,
+            &taken,
+        )?;
+        let triple = |v: Vector3<f64>| [v.x, v.y, v.z];
+        Some(NextTouchHint {
+            point_mm: triple(next.point.coords * 1e3),
+            normal: triple(next.normal),
+            approach: triple(next.approach),
+            tilt_deg: next.tilt_rad.to_degrees(),
+            reason: next.reason,
+        })
     }
 
     /// Refuses a sample whose tool moves faster than the limit: a touch is taken at rest.

@@ -270,6 +270,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     }
     let mut service = handlers::Service {
         results: template.results.clone().unwrap_or_default(),
+        touch_candidates: std::sync::OnceLock::new(),
         template,
         folder,
         inspections,

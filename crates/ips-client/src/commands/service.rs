@@ -143,6 +143,19 @@ pub fn get(args: &GetArgs) -> Result<String, CliError> {
         if let Some(note) = &reply.note {
             text += &format!("  note: {note}\n");
         }
+        if let Some(next) = &reply.next_touch {
+            let [x, y, z] = next.point_mm;
+            let [ax, ay, az] = next.approach.map(|v| crate::display_round(v, 3));
+            text += &format!(
+                "  next: touch ({x:.1}, {y:.1}, {z:.1}) mm moving along ({ax:.3}, {ay:.3}, {az:.3}){}\n        because {}\n",
+                if next.tilt_deg > 0.0 {
+                    format!(", tilted {:.0} deg from the normal", next.tilt_deg)
+                } else {
+                    String::new()
+                },
+                next.reason
+            );
+        }
         text
     })
 }
