@@ -69,7 +69,7 @@ pub fn candidates(mesh: &Mesh, base_from_part: &Isometry3<f64>, radius_m: f64) -
         .map(|t| mesh.triangle_area(t))
         .collect();
     let total: f64 = areas.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return Vec::new();
     }
     let mut rng = SplitMix64::new(0x6e65_7874_746f_7563);
