@@ -81,7 +81,9 @@ fn following_the_suggestions_fixes_the_pose_in_six_touches_where_random_touches_
                 random_full_rank += 1;
             }
         }
-        println!("{name}: six random touches fix the pose in {random_full_rank} of 10 trials, guided in 10 of 10");
+        println!(
+            "{name}: six random touches fix the pose in {random_full_rank} of 10 trials, guided in 10 of 10"
+        );
         assert!(random_full_rank < 10, "{name}: random touches did as well");
     }
 }
