@@ -228,6 +228,54 @@ pub fn next_touch(
     })
 }
 
+/// The touch that best tells apart poses an ambiguous alignment found equally good: among
+/// `candidates` (part frame), the place whose position under the chosen pose `base_from_part`
+/// lies farthest from the part's surface under every `alternative` (the smallest of those
+/// distances is maximised). `None` without alternatives or candidates, or when no place is a
+/// tenth of a millimetre apart (the alternatives are the same pose, or the part is symmetric
+/// there).
+pub fn separating_touch(
+    mesh: &Mesh,
+    base_from_part: &Isometry3<f64>,
+    alternatives: &[Isometry3<f64>],
+    candidates: &[Candidate],
+) -> Option<NextTouch> {
+    if alternatives.is_empty() {
+        return None;
+    }
+    let (best, separation) = candidates
+        .iter()
+        .map(|c| {
+            let point = base_from_part * c.point_in_part;
+            let nearest = alternatives
+                .iter()
+                .map(|alternative| {
+                    mesh.closest_point(&(alternative.inverse() * point))
+                        .signed_distance
+                        .abs()
+                })
+                .fold(f64::INFINITY, f64::min);
+            (c, nearest)
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    if separation < 1e-4 {
+        return None;
+    }
+    let normal = base_from_part.rotation * best.normal_in_part;
+    Some(NextTouch {
+        point: base_from_part * best.point_in_part,
+        normal,
+        approach: -normal,
+        tilt_rad: 0.0,
+        reason: format!(
+            "the alignment found {} other pose(s) as good as the one shown; here the part of the \
+             closest of them is {:.1} mm away, so this touch tells them apart",
+            alternatives.len(),
+            separation * 1e3
+        ),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -249,6 +297,22 @@ mod tests {
                 approach: Some(pose.rotation * -n),
             })
             .collect()
+    }
+
+    #[test]
+    fn an_ambiguous_pose_is_told_apart_where_the_alternatives_differ_most() {
+        // A block turned half a turn about z is the same block: touches on its faces cannot
+        // tell the two apart, except where the step is.
+        let mesh = cuboid();
+        let pose = Isometry3::translation(0.6, 0.0, 0.1);
+        let found = candidates(&mesh, &pose, 0.003);
+        let turned = pose * Isometry3::rotation(Vector3::z() * std::f64::consts::PI);
+        assert!(separating_touch(&mesh, &pose, &[turned], &found).is_none());
+        let shifted = pose * Isometry3::translation(0.004, 0.0, 0.0);
+        let next = separating_touch(&mesh, &pose, &[shifted], &found).expect("a touch");
+        // A 4 mm shift along x shows on the faces square to x.
+        assert!(next.normal.x.abs() > 0.99, "{next:?}");
+        assert!(next.reason.contains("4.0 mm away"), "{}", next.reason);
     }
 
     #[test]

@@ -85,6 +85,18 @@ pub(crate) struct Service {
     pub touch_candidates: std::sync::OnceLock<Vec<guidance::Candidate>>,
 }
 
+/// A suggested touch as the `get` reply carries it.
+fn hint(next: guidance::NextTouch) -> NextTouchHint {
+    let triple = |v: Vector3<f64>| [v.x, v.y, v.z];
+    NextTouchHint {
+        point_mm: triple(next.point.coords * 1e3),
+        normal: triple(next.normal),
+        approach: triple(next.approach),
+        tilt_deg: next.tilt_rad.to_degrees(),
+        reason: next.reason,
+    }
+}
+
 /// A ball farther than this from the nominal part's surface is named in the `get` reply: a
 /// touch of another object, or a nominal pose far off (the demo's is 42 mm).
 const FAR_FROM_NOMINAL_M: f64 = 0.05;
@@ -403,6 +415,9 @@ impl Service {
                 self.tool.tip_radius_m,
             )
         });
+        if let Some(next) = self.separating_ambiguity(candidates) {
+            return Some(next);
+        }
         let taken: Vec<TakenTouch> = self
             .inspections
             .iter()
@@ -421,14 +436,27 @@ impl Service {
             candidates,
             &taken,
         )?;
-        let triple = |v: Vector3<f64>| [v.x, v.y, v.z];
-        Some(NextTouchHint {
-            point_mm: triple(next.point.coords * 1e3),
-            normal: triple(next.normal),
-            approach: triple(next.approach),
-            tilt_deg: next.tilt_rad.to_degrees(),
-            reason: next.reason,
-        })
+        Some(hint(next))
+    }
+
+    /// When the last alignment found other poses as good (and its touches are all still
+    /// there), the touch that tells them apart.
+    fn separating_ambiguity(&self, candidates: &[guidance::Candidate]) -> Option<NextTouchHint> {
+        let saved = self.results.alignment.as_ref()?;
+        let report = &saved.report;
+        let ids = self.inspection_ids();
+        if !report.ambiguous || !saved.inspections.iter().all(|id| ids.contains(id)) {
+            return None;
+        }
+        let pose = |p: &protocol::Pose| align_core::pose::isometry_from_xyz_rpy(p.xyz, p.rpy);
+        let alternatives: Vec<_> = report.candidates.iter().map(|c| pose(&c.pose)).collect();
+        guidance::separating_touch(
+            &self.part_mesh,
+            &pose(&report.alignment.pose),
+            &alternatives,
+            candidates,
+        )
+        .map(hint)
     }
 
     /// Refuses a sample whose tool moves faster than the limit: a touch is taken at rest.
