@@ -115,10 +115,13 @@ fn example_session_reports_the_pose_uncertainty() {
         "starts",
         "notes",
         "uncertainty",
+        "base_frame",
     ] {
         assert!(keys.contains(&key), "{key} missing from {keys:?}");
     }
-    assert_eq!(keys.len(), 12, "{keys:?}");
+    assert_eq!(keys.len(), 13, "{keys:?}");
+    assert_eq!(result["base_frame"], "base_link");
+    assert!(result["residuals"][0]["ball_centre"].is_array());
     assert!(result.get("uncertainty_error").is_none());
     assert_eq!(result["converged"], true);
     assert_eq!(result["residuals"].as_array().unwrap().len(), 9);

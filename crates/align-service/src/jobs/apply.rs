@@ -83,7 +83,8 @@ pub fn apply_effect(
         if !value.is_finite() {
             return Err(BadInput(format!("the fitted {name} is not finite")));
         }
-        match target(name, dof)? {
+        let target = target(name, dof)?;
+        match target {
             Target::TipRadius => {
                 let before = out.tool.tip_radius;
                 let after = before + value;
@@ -126,7 +127,7 @@ pub fn apply_effect(
                 changes.push(applied);
             }
             Target::JointOffset(joint) | Target::JointCompliance(joint) => {
-                let compliance = matches!(target(name, dof)?, Target::JointCompliance(_));
+                let compliance = matches!(target, Target::JointCompliance(_));
                 let robot = out
                     .robot
                     .as_mut()
