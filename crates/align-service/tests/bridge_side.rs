@@ -87,6 +87,7 @@ fn mirror_through(side: RobotSide) -> Vec<(String, Command)> {
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
         data_dirs: Vec::new(),
+        trigger: None,
     })
     .unwrap();
     let client = socket(&context, zmq::REQ);
@@ -149,6 +150,7 @@ fn nonsense_limits_are_refused_before_the_service_starts() {
             max_sample_age_s: age_s,
             max_tool_speed_m_s: speed_m_s,
             data_dirs: Vec::new(),
+            trigger: None,
         })
         .unwrap_err();
         assert!(

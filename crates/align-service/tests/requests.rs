@@ -39,6 +39,7 @@ impl Fixture {
             max_sample_age_s: 0.1,
             max_tool_speed_m_s: 0.005,
             data_dirs: vec![folder.clone()],
+            trigger: None,
         })
         .unwrap();
         let context = zmq::Context::new();

@@ -71,6 +71,7 @@ fn sixteen_touch_session(true_radius_m: f64) -> SessionFile {
             qd: None,
             stamp: None,
             face: None,
+            trigger: None,
         })
         .collect();
     let absolute = |relative: &str| folder.join(relative).display().to_string();
@@ -191,6 +192,7 @@ fn main() {
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
+        trigger: None,
     })
     .expect("service starts");
     let client = socket(&context, zmq::REQ);

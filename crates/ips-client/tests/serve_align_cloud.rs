@@ -72,6 +72,7 @@ impl Fixture {
             max_sample_age_s: 0.1,
             max_tool_speed_m_s: 0.005,
             data_dirs: vec![folder.clone(), example("")],
+            trigger: None,
         })
         .unwrap();
         let client = socket(&context, zmq::REQ);

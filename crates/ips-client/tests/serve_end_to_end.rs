@@ -119,6 +119,7 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
+        trigger: None,
     };
     let service = serve(&config);
     let context = zmq::Context::new();
@@ -361,6 +362,7 @@ fn a_bridge_restart_mid_session_is_recovered() {
         max_sample_age_s: 0.1,
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
+        trigger: None,
     });
     let context = zmq::Context::new();
     let client = req(&context, &service.rep_endpoint);

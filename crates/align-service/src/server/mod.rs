@@ -7,7 +7,9 @@
 //! `max_sample_age_s` (the stream stalled or the bridge lost its robot) or the tool moves faster
 //! than `max_tool_speed_m_s` (a touch is taken at rest). Every change to the inspection list is
 //! journaled ([`journal`]) before the reply, so an acknowledged inspection survives a crash; a
-//! restarted service replays the journal.
+//! restarted service replays the journal. With a touch-trigger probe (`Config::trigger`), each
+//! rising edge of its input captures an inspection at the edge's time without a `get`, through
+//! the same journal ([`trigger`]).
 //!
 //! `align-cloud` aligns the session's part (or a requested mesh) to a scanner cloud file named
 //! in the request; `diagnose` diagnoses the inspections in memory with the session's robot, tool
@@ -29,6 +31,7 @@ mod files;
 mod handlers;
 mod journal;
 mod samples;
+mod trigger;
 
 pub use journal::JournalReport;
 
@@ -61,6 +64,10 @@ pub struct Config {
     /// The only directories whose regular files `load`, `save` and `align-cloud` may name;
     /// empty means the session file's folder.
     pub data_dirs: Vec<PathBuf>,
+    /// The digital input a touch-trigger probe is wired to: while mirroring, each rising edge
+    /// captures an inspection at the edge's time (module `trigger`). `None`: touches are
+    /// captured by `get` only.
+    pub trigger: Option<protocol::DigitalInput>,
 }
 
 /// Why the service could not start.
@@ -230,8 +237,9 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     let mut threads = Vec::new();
     {
         let (samples, stop) = (Arc::clone(&samples), Arc::clone(&stop));
+        let trigger = config.trigger.map(trigger::EdgeDetector::new);
         threads.push(thread::spawn(move || {
-            samples::subscribe_loop(sub, samples, stop)
+            samples::subscribe_loop(sub, samples, trigger, stop)
         }));
     }
     let mut service = handlers::Service {

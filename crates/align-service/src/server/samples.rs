@@ -6,6 +6,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use super::trigger::{EdgeDetector, TriggerQueue};
+
 /// Samples kept for a get at a given controller time: 4 s at 1 kHz, 8 s at 500 Hz.
 pub(crate) const HISTORY_SAMPLES: usize = 4096;
 
@@ -16,6 +18,8 @@ pub(crate) struct JointSample {
     pub qd: Vec<f64>,
     pub controller_time: f64,
     pub received: Instant,
+    /// The controller's digital inputs with this sample, where the bridge sends them.
+    pub digital_inputs: Option<u64>,
 }
 
 /// What the subscription thread shares with the request thread.
@@ -24,6 +28,8 @@ pub(crate) struct Samples {
     latest: Mutex<Option<JointSample>>,
     /// The last [`HISTORY_SAMPLES`] samples, for a get at a given controller time.
     history: Mutex<VecDeque<JointSample>>,
+    /// Inspections a touch-trigger probe's edges asked for, not yet taken (module `trigger`).
+    pub(crate) triggers: TriggerQueue,
 }
 
 impl Samples {
@@ -73,8 +79,14 @@ impl Samples {
     }
 }
 
-/// Receives hardware-state messages until `stop`, keeping the valid ones.
-pub(crate) fn subscribe_loop(sub: zmq::Socket, samples: Arc<Samples>, stop: Arc<AtomicBool>) {
+/// Receives hardware-state messages until `stop`, keeping the valid ones; with a `trigger`
+/// detector, queues a capture at each of its edges.
+pub(crate) fn subscribe_loop(
+    sub: zmq::Socket,
+    samples: Arc<Samples>,
+    mut trigger: Option<EdgeDetector>,
+    stop: Arc<AtomicBool>,
+) {
     while !stop.load(Ordering::Relaxed) {
         let Ok(bytes) = sub.recv_bytes(0) else {
             continue;
@@ -85,11 +97,16 @@ pub(crate) fn subscribe_loop(sub: zmq::Socket, samples: Arc<Samples>, stop: Arc<
         if message.body.validate().is_err() {
             continue;
         }
-        samples.record(JointSample {
+        let sample = JointSample {
             q: message.body.position,
             qd: message.body.velocity,
             controller_time: message.body.controller_time,
             received: Instant::now(),
-        });
+            digital_inputs: message.body.digital_inputs,
+        };
+        if let Some(capture) = trigger.as_mut().and_then(|detector| detector.feed(&sample)) {
+            samples.triggers.push(capture);
+        }
+        samples.record(sample);
     }
 }

@@ -34,6 +34,13 @@ pub struct ServeArgs {
     /// repeatable. Without it, only the session file's folder.
     #[arg(long = "data-dir", value_name = "DIR")]
     pub data_dirs: Vec<PathBuf>,
+    /// The digital input a touch-trigger probe is wired to (DI0-DI7 standard, CI0-CI7
+    /// configurable, TI0-TI1 tool inputs, as the hwState's `digital_inputs` bits 0-17). While
+    /// mirroring, each rising edge captures an inspection without a `get`, at the edge's
+    /// controller time: the midpoint of the samples around it, joints interpolated there
+    /// (worst case half a sample period off). Without it, only `get` captures.
+    #[arg(long, value_name = "INPUT")]
+    pub trigger: Option<protocol::DigitalInput>,
 }
 
 impl ServeArgs {
@@ -47,6 +54,7 @@ impl ServeArgs {
             max_sample_age_s: self.max_sample_age,
             max_tool_speed_m_s: self.max_tool_speed,
             data_dirs: self.data_dirs.clone(),
+            trigger: self.trigger,
         }
     }
 }
