@@ -37,8 +37,10 @@ use super::samples::JointSample;
 
 /// How long the input must read low before a rise counts, s of controller time.
 pub(crate) const DEBOUNCE_S: f64 = 0.05;
-/// The widest gap between the samples around an edge that still places it, s.
-pub(crate) const MAX_EDGE_GAP_S: f64 = 0.05;
+/// The widest gap between the samples around an edge that still places it, s: a dozen CB3
+/// periods, so a loaded machine's late sample still counts while a reconnection (at least
+/// 100 ms of backoff) does not.
+pub(crate) const MAX_EDGE_GAP_S: f64 = 0.1;
 /// Captures waiting for the request thread (it drains them at least every 100 ms unless a
 /// long request runs); more than this are dropped with a warning rather than held without end.
 const MAX_PENDING: usize = 256;

@@ -93,11 +93,11 @@ fn other_inputs_gaps_and_unknown_inputs_capture_nothing() {
     // Another bit rising is not this input's edge.
     let mut detector = EdgeDetector::new(DigitalInput::DI0);
     assert!(run(&mut detector, 30, |tick| tick >= 15, 1 << 16).is_empty());
-    // A rise across a gap of 100 ms in the stream.
+    // A rise across a gap of 200 ms in the stream.
     let mut detector = EdgeDetector::new(DigitalInput::DI0);
     let captures: Vec<_> = (0..10)
-        .chain(22..30)
-        .filter_map(|tick| detector.feed(&sample(tick, Some(u64::from(tick >= 22)))))
+        .chain(35..40)
+        .filter_map(|tick| detector.feed(&sample(tick, Some(u64::from(tick >= 35)))))
         .collect();
     assert!(captures.is_empty());
     // Samples without inputs in between: the low run starts again after them.
