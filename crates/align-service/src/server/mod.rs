@@ -27,6 +27,7 @@
 //! thread and is never blocked by requests, so the live sample a `get` takes after a slow
 //! request is as fresh as ever.
 
+mod edges;
 mod files;
 mod handlers;
 mod journal;
@@ -237,9 +238,10 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     let mut threads = Vec::new();
     {
         let (samples, stop) = (Arc::clone(&samples), Arc::clone(&stop));
-        let trigger = config.trigger.map(trigger::EdgeDetector::new);
+        let mut trigger = config.trigger.map(edges::EdgeDetector::new);
+        let detect = move |sample: &samples::JointSample| trigger.as_mut()?.feed(sample);
         threads.push(thread::spawn(move || {
-            samples::subscribe_loop(sub, samples, trigger, stop)
+            samples::subscribe_loop(sub, samples, detect, stop)
         }));
     }
     let mut service = handlers::Service {

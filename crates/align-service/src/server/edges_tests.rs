@@ -1,6 +1,7 @@
 use std::time::Instant;
 
 use super::*;
+use crate::server::samples::TriggerQueue;
 
 /// 125 Hz, a CB3's RTDE rate.
 const PERIOD_S: f64 = 0.008;
