@@ -63,7 +63,7 @@ fn an_input_already_high_at_the_start_is_not_an_edge_but_its_next_rise_is() {
     assert!(high_at_start.is_empty());
     // Falls, stays low for 80 ms, rises: one capture.
     let mut detector = EdgeDetector::new(DigitalInput::DI0);
-    let captures = run(&mut detector, 30, |tick| tick < 5 || tick >= 15, 1);
+    let captures = run(&mut detector, 30, |tick| !(5..15).contains(&tick), 1);
     assert_eq!(captures.len(), 1);
     assert!((captures[0].controller_time_s - (10.0 + 14.5 * PERIOD_S)).abs() < 1e-12);
 }
