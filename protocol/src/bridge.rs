@@ -134,6 +134,11 @@ pub struct HwStateBody {
     /// UR safety mode.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety_mode: Option<i32>,
+    /// The controller's digital inputs sampled with this sample, one bit each (UR's
+    /// `actual_digital_input_bits`: bits 0-7 DI0-7, 8-15 CI0-7, 16-17 TI0-1; see [`crate::io`]);
+    /// absent when the controller does not offer them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub digital_inputs: Option<u64>,
 }
 
 pub type HwState = Envelope<HwStateBody>;

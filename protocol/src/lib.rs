@@ -12,6 +12,7 @@
 //! - [`reports`]: the alignment and diagnosis documents the service replies and `ips` prints.
 //! - [`session`], [`journal`]: the session file (6.3) and the service's journal lines.
 //! - [`pose`]: the one pose type of all of them.
+//! - [`io`]: the controller's digital inputs in the hardware state (a touch-trigger probe's).
 //! - [`calibration`]: a UR controller's calibrated DH table and the calibration file.
 //!
 //! Senders validate before serialising: [`to_json`] refuses NaN or infinite numbers, which JSON
@@ -22,6 +23,7 @@
 pub mod bridge;
 pub mod calibration;
 pub mod envelope;
+pub mod io;
 pub mod journal;
 pub mod pose;
 pub mod reports;
@@ -34,6 +36,7 @@ pub use bridge::{
     StatusBody, ack_error, ack_ok, hw_state, instruction, parse_request, status,
 };
 pub use envelope::{Envelope, Header, IPS, Message, ProtocolError, to_json};
+pub use io::{DigitalInput, InputBank, NotAnInput};
 pub use journal::JournalEntry;
 pub use pose::Pose;
 pub use service::{

@@ -120,4 +120,8 @@ pub struct Inspection {
     /// The part face this touch was meant for (a face hint); an extension of 6.3.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub face: Option<String>,
+    /// The digital input whose rising edge captured this touch (`"DI0"`, a touch-trigger
+    /// probe's), absent for touches taken by request; an extension of 6.3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trigger: Option<String>,
 }

@@ -121,6 +121,10 @@ fn default_dwell_s() -> f64 {
     0.5
 }
 
+fn standard_input_0() -> crate::io::DigitalInput {
+    crate::io::DigitalInput::DI0
+}
+
 /// The `probe` request.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ProbeRequest {
@@ -154,6 +158,10 @@ pub struct ProbeRequest {
     /// trigger's time stamp a touch-trigger probe would give.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub on_the_fly_speeds_m_s: Option<Vec<f64>>,
+    /// The digital input the simulated touch-trigger probe is wired to: high while the ball
+    /// touches (or is pressed into) the part, in the RTDE output `actual_digital_input_bits`.
+    #[serde(default = "standard_input_0")]
+    pub trigger_input: crate::io::DigitalInput,
 }
 
 /// The reply to `status`.
@@ -217,12 +225,15 @@ pub struct ProbePlan {
 }
 
 /// One touch's time in contact, controller time, s: resting from `from_s` to `until_s`, or on
-/// the fly crossing the contact at `at_s`.
+/// the fly crossing the contact at `at_s`. The trigger input is high from `at_s` (the ball
+/// reaches the surface) until `released_s` (it leaves it again).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Contact {
     pub at_s: f64,
     pub from_s: f64,
     pub until_s: f64,
+    #[serde(default)]
+    pub released_s: f64,
 }
 
 /// The reply to the commands that only succeed or fail.

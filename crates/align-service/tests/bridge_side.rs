@@ -88,6 +88,7 @@ fn mirror_through(side: RobotSide) -> Vec<(String, Command)> {
         max_tool_speed_m_s: 0.005,
         data_dirs: Vec::new(),
         keep_session_inspections: true,
+        trigger: None,
     })
     .unwrap();
     let client = socket(&context, zmq::REQ);
@@ -151,6 +152,7 @@ fn nonsense_limits_are_refused_before_the_service_starts() {
             max_tool_speed_m_s: speed_m_s,
             data_dirs: Vec::new(),
             keep_session_inspections: true,
+            trigger: None,
         })
         .unwrap_err();
         assert!(

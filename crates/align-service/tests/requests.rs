@@ -40,6 +40,7 @@ impl Fixture {
             max_tool_speed_m_s: 0.005,
             data_dirs: vec![folder.clone()],
             keep_session_inspections: true,
+            trigger: None,
         })
         .unwrap();
         let context = zmq::Context::new();
@@ -241,6 +242,7 @@ fn the_session_files_inspections_are_kept_or_dropped_and_the_start_says_which() 
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
         keep_session_inspections: keep,
+        trigger: None,
     };
     let count = |service: &Handle| {
         let context = zmq::Context::new();

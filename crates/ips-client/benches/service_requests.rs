@@ -71,6 +71,7 @@ fn sixteen_touch_session(true_radius_m: f64) -> SessionFile {
             qd: None,
             stamp: None,
             face: None,
+            trigger: None,
         })
         .collect();
     let absolute = |relative: &str| folder.join(relative).display().to_string();
@@ -192,6 +193,7 @@ fn main() {
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
         keep_session_inspections: true,
+        trigger: None,
     })
     .expect("service starts");
     let client = socket(&context, zmq::REQ);

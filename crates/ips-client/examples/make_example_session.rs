@@ -49,6 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             qd: None,
             stamp: Some(index as f64 * 4.0),
             face: None,
+            trigger: None,
         })
         .collect();
     let pose = |p: &Isometry3<f64>| {
@@ -118,6 +119,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             qd: None,
             stamp: None,
             face: None,
+            trigger: None,
         })
         .collect();
     std::fs::write(

@@ -73,6 +73,7 @@ impl Fixture {
             max_tool_speed_m_s: 0.005,
             data_dirs: vec![folder.clone(), example("")],
             keep_session_inspections: true,
+            trigger: None,
         })
         .unwrap();
         let client = socket(&context, zmq::REQ);

@@ -124,6 +124,7 @@ fn inspections_are_captured_journaled_restored_and_aligned() {
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
         keep_session_inspections: true,
+        trigger: None,
     };
     let service = serve(&config);
     let context = zmq::Context::new();
@@ -424,6 +425,7 @@ fn a_bridge_restart_mid_session_is_recovered() {
         max_tool_speed_m_s: 0.005,
         data_dirs: vec![folder.clone()],
         keep_session_inspections: true,
+        trigger: None,
     });
     let context = zmq::Context::new();
     let client = req(&context, &service.rep_endpoint);

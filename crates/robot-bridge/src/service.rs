@@ -192,6 +192,7 @@ fn publish_loop(
                 controller_seq: sample.controller_seq,
                 robot_mode: sample.robot_mode,
                 safety_mode: sample.safety_mode,
+                digital_inputs: sample.digital_inputs,
             },
         );
         // A sample that fails validation (NaN from the controller) is dropped, never sent.

@@ -272,3 +272,166 @@ fn a_controller_without_a_primary_interface_streams_on_without_calibration() {
     assert_eq!(states(&sub, 5).len(), 5);
     cell.stop();
 }
+
+/// The example part, its hidden pose and the probe of `examples/step_block_ur10`, probed on
+/// the fly at 5 mm/s with the trigger wired to `input`.
+fn probe_request(input: &str) -> Value {
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let truth: Value = serde_json::from_str(
+        &std::fs::read_to_string(examples.join("step_block_ur10/truth.json")).unwrap(),
+    )
+    .unwrap();
+    json!({"command": "probe",
+        "mesh": examples.join("step_block_ur10/step_block.stl"), "mesh_scale": 0.001,
+        "base_from_part": truth["base_from_part"],
+        "tcp": {"xyz": [0.0, 0.0, 0.15], "rpy": [0.0, 0.0, 0.0]}, "tip_radius": 0.003,
+        "touches": 6, "on_the_fly_speeds_m_s": [0.005], "trigger_input": input})
+}
+
+#[test]
+fn the_trigger_input_reaches_the_hw_state_exactly_while_the_probe_touches() {
+    let cell = UrCell::with_robot(ShippedRobot::Ur10);
+    let client = Client::new(cell.bridge(), UrCell::SIDE);
+    client.wait_connected();
+    let sub = client.subscriber();
+    client.start_mirroring();
+    // CI3 is bit 11 of actual_digital_input_bits.
+    let plan = cell.sim().send(probe_request("CI3"));
+    assert_eq!(plan["ok"], true, "{plan}");
+    let windows: Vec<(f64, f64)> = plan["contacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            (
+                c["at_s"].as_f64().unwrap(),
+                c["released_s"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    for (at_s, released_s) in &windows {
+        assert!(released_s > at_s, "{plan}");
+    }
+    // Two touches are enough to see rises and falls at the planned times.
+    let until_s = windows[1].1 + 0.05;
+    let mut high_per_touch = [0usize; 2];
+    loop {
+        let state = conformance::next_state(&sub);
+        let body = &state["body"];
+        let time_s = body["controller_time"].as_f64().unwrap();
+        if time_s > until_s {
+            break;
+        }
+        let bits = body["digital_inputs"]
+            .as_u64()
+            .unwrap_or_else(|| panic!("no digital_inputs: {state}"));
+        let touching = windows.iter().position(|(a, r)| (*a..*r).contains(&time_s));
+        let expected = if touching.is_some() { 1 << 11 } else { 0 };
+        assert_eq!(bits, expected, "at {time_s} s, contacts {windows:?}");
+        if let Some(touch @ 0..2) = touching {
+            high_per_touch[touch] += 1;
+        }
+    }
+    // 1 mm in and back out at 5 mm/s: over 0.2 s of contact, 25 samples at 125 Hz.
+    assert!(
+        high_per_touch.iter().all(|n| *n >= 20),
+        "{high_per_touch:?}"
+    );
+    cell.stop();
+}
+
+/// A UR controller that knows no `actual_digital_input_bits` (NOT_FOUND) and streams whatever
+/// else it is asked for at 125 Hz; returns its port.
+fn controller_without_digital_inputs() -> u16 {
+    use ur_rtde::{Package, encode_value, output_type, package, recipe_names};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        let Ok((mut stream, _)) = listener.accept() else {
+            return;
+        };
+        let mut types = Vec::new();
+        loop {
+            let Ok(request) = Package::read_from(&mut stream) else {
+                return;
+            };
+            let reply = match request.kind {
+                package::REQUEST_PROTOCOL_VERSION => vec![1],
+                package::GET_URCONTROL_VERSION => [3u32, 15, 7, 106]
+                    .iter()
+                    .flat_map(|part| part.to_be_bytes())
+                    .collect(),
+                package::CONTROL_PACKAGE_SETUP_OUTPUTS => {
+                    let names = String::from_utf8_lossy(&request.payload[8..]).into_owned();
+                    types = recipe_names(&names)
+                        .into_iter()
+                        .map(|name| output_type(name).filter(|_| !name.contains("digital")))
+                        .collect();
+                    let text: Vec<&str> = types
+                        .iter()
+                        .map(|t| t.map_or("NOT_FOUND", ur_rtde::ValueType::name))
+                        .collect();
+                    let complete = types.iter().all(Option::is_some);
+                    let mut payload = vec![u8::from(complete)];
+                    payload.extend_from_slice(text.join(",").as_bytes());
+                    payload
+                }
+                package::CONTROL_PACKAGE_START => vec![1],
+                _ => continue,
+            };
+            let started = request.kind == package::CONTROL_PACKAGE_START;
+            if Package::new(request.kind, reply)
+                .write_to(&mut stream)
+                .is_err()
+            {
+                return;
+            }
+            if started {
+                break;
+            }
+        }
+        for tick in 0u32.. {
+            let mut payload = vec![1];
+            for kind in types.iter().flatten() {
+                let value = if *kind == ur_rtde::ValueType::Double {
+                    f64::from(tick) * 0.008
+                } else {
+                    0.0
+                };
+                encode_value(*kind, &vec![value; kind.count()], &mut payload);
+            }
+            if Package::new(package::DATA_PACKAGE, payload)
+                .write_to(&mut stream)
+                .is_err()
+            {
+                return;
+            }
+            // A stand-in controller's send clock, not a synchronisation.
+            std::thread::sleep(std::time::Duration::from_millis(8));
+        }
+    });
+    port
+}
+
+#[test]
+fn a_controller_without_digital_inputs_streams_on_without_them() {
+    let bridge = robot_bridge::start(&Config {
+        backend: BackendConfig::Ur(UrConfig {
+            robot_host: "127.0.0.1".to_owned(),
+            rtde_port: controller_without_digital_inputs(),
+            primary_port: None,
+        }),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        publish: "tcp://127.0.0.1:*".to_owned(),
+    })
+    .unwrap();
+    let client = Client::new(&bridge, UrCell::SIDE);
+    client.wait_connected();
+    let sub = client.subscriber();
+    client.start_mirroring();
+    for state in states(&sub, 10) {
+        assert!(state["body"].get("digital_inputs").is_none(), "{state}");
+        assert_eq!(state["body"]["position"].as_array().unwrap().len(), 6);
+    }
+    bridge.stop();
+}

@@ -15,7 +15,7 @@
 //! | `{"command":"pause"}` / `{"command":"resume"}` | stop / restart sending data (connections stay) |
 //! | `{"command":"drop"}` | close every RTDE connection (clients may reconnect) |
 //! | `{"command":"effects","joint_offsets":[...],"compliance_rad_per_nm":[...],"payload":{...},"cyclic_encoder":{...},"noise_sigma_rad":s}` | what the encoders report differs from the true joint angles, undeclared to everyone else (module `effects`; absent fields are no effect) |
-//! | `{"command":"probe","mesh":PATH,"base_from_part":{"xyz","rpy"},"tcp":{"xyz","rpy"},"tip_radius":m,...}` | plans 3-2-1 touches on the part at that (hidden) pose and runs them: `{"ok":true,"touches":n,"contacts":[{"from_s","until_s"}],"tilts_rad":[...],"end_s"}`; status then carries `"probe":{"touches","active_touch","at_rest","done"}` (module `probing`) |
+//! | `{"command":"probe","mesh":PATH,"base_from_part":{"xyz","rpy"},"tcp":{"xyz","rpy"},"tip_radius":m,...}` | plans 3-2-1 touches on the part at that (hidden) pose and runs them: `{"ok":true,"touches":n,"contacts":[{"from_s","until_s","at_s","released_s"}],"tilts_rad":[...],"end_s"}`; status then carries `"probe":{"touches","active_touch","at_rest","done"}` (module `probing`). The probe is a touch trigger wired to `"trigger_input"` (default `"DI0"`): that bit of the RTDE output `actual_digital_input_bits` is high from `at_s` to `released_s` |
 //!
 //! Errors reply `{"ok":false,"reason":"..."}`, among them requests of more than one frame, over
 //! 64 KiB ([`MAX_REQUEST_BYTES`]), or with arrays where objects belong. `q` is where the joints really are; `reported_q`
@@ -125,6 +125,9 @@ pub(crate) struct Sample {
     /// Tool frame, m/s^2: what the tool flange's accelerometer reads at rest (gravity's
     /// reaction, pointing up); the arm's own accelerations are not modelled.
     tool_accelerometer: [f64; 3],
+    /// The digital inputs as UR's `actual_digital_input_bits` lays them out: the probe's
+    /// trigger input while its ball touches the part.
+    digital_inputs: u64,
 }
 
 /// Controller states a healthy arm reports (UR's RTDE guide): robot mode RUNNING, safety mode
@@ -164,6 +167,8 @@ impl Sample {
             "actual_main_voltage" | "actual_robot_voltage" => vec![SUPPLY_VOLTAGE_V],
             "actual_joint_voltage" => vec![SUPPLY_VOLTAGE_V; self.q.len()],
             "joint_temperatures" => vec![IDLE_JOINT_TEMPERATURE_C; self.q.len()],
+            // Exact as f64: only bits 0-17 are ever set.
+            "actual_digital_input_bits" => vec![self.digital_inputs as f64],
             _ => Vec::new(),
         }
     }
@@ -216,6 +221,14 @@ impl Shared {
         let t = base_from_tool.translation.vector;
         let r = base_from_tool.rotation.scaled_axis();
         let speed = jacobian * DVector::from_column_slice(&qd);
+        // The inputs are sampled at the time stamp, with no encoder latency: a trigger
+        // latency shows as encoder angles taken late relative to the edge.
+        let digital_inputs = self
+            .probe
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .map_or(0, |schedule| schedule.digital_inputs(time_s));
         let up_in_tool = base_from_tool
             .rotation
             .inverse_transform_vector(&Vector3::new(0.0, 0.0, STANDARD_GRAVITY_M_PER_S2));
@@ -228,6 +241,7 @@ impl Shared {
             tcp_pose: [t.x, t.y, t.z, r.x, r.y, r.z],
             tcp_speed: [speed[0], speed[1], speed[2], speed[3], speed[4], speed[5]],
             tool_accelerometer: [up_in_tool.x, up_in_tool.y, up_in_tool.z],
+            digital_inputs,
         }
     }
 

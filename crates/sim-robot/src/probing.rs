@@ -8,6 +8,7 @@
 use align_core::geometry::Mesh;
 use align_core::pose::isometry_from_xyz_rpy;
 use align_core::trials::planning::{PlanOptions, plan_touches};
+use protocol::DigitalInput;
 use protocol::sim::{Contact, ProbePlan, ProbeRequest, ProbeStatus};
 
 use crate::Shared;
@@ -22,10 +23,16 @@ const CONTACT_MOVE_S: f64 = 0.25;
 /// How far before and past the contact an on-the-fly touch moves at constant speed, m.
 const PASS_THROUGH_M: f64 = 0.001;
 
+/// Bisection steps for the time the ball leaves the surface: the retreat lasts
+/// `CONTACT_MOVE_S`, so 40 halvings leave well under a nanosecond.
+const RELEASE_BISECTIONS: usize = 40;
+
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Schedule {
     pub(crate) contacts: Vec<Contact>,
     pub(crate) end_s: f64,
+    /// The digital input the trigger probe is wired to.
+    pub(crate) trigger_input: DigitalInput,
 }
 
 /// Joints `PASS_THROUGH_M` before and past the contact along the probe axis.
@@ -65,6 +72,49 @@ impl Schedule {
             touches: self.contacts.len(),
         }
     }
+
+    /// The controller's digital inputs at `time_s`: the trigger input is high from the moment
+    /// the ball reaches the surface until it leaves it, exactly, whatever the controller's
+    /// sample times; a controller sampling the input sees the edge between two samples.
+    pub(crate) fn digital_inputs(&self, time_s: f64) -> u64 {
+        let touching = self
+            .contacts
+            .iter()
+            .any(|contact| (contact.at_s..contact.released_s).contains(&time_s));
+        if touching {
+            self.trigger_input.mask()
+        } else {
+            0
+        }
+    }
+}
+
+/// When an on-the-fly touch's ball leaves the surface again: on the retreat that starts
+/// pressed `PASS_THROUGH_M` into the part at `pressed_s`, the first time its centre is back
+/// behind the contact point along the probe axis (`contact`: the TCP at the contact, its z
+/// axis pointing into the part). The depth falls monotonically on the retreat's blend.
+fn released_s(
+    shared: &Shared,
+    motion: &Motion,
+    flange_from_tcp: &nalgebra::Isometry3<f64>,
+    contact: &nalgebra::Isometry3<f64>,
+    pressed_s: f64,
+) -> f64 {
+    let axis = contact.rotation * nalgebra::Vector3::z();
+    let depth_m = |time_s: f64| {
+        let tcp = shared.chain.forward_unchecked(&motion.position(time_s)) * flange_from_tcp;
+        (tcp.translation.vector - contact.translation.vector).dot(&axis)
+    };
+    let (mut pressed, mut free) = (pressed_s, pressed_s + CONTACT_MOVE_S);
+    for _ in 0..RELEASE_BISECTIONS {
+        let middle = 0.5 * (pressed + free);
+        if depth_m(middle) >= 0.0 {
+            pressed = middle;
+        } else {
+            free = middle;
+        }
+    }
+    free
 }
 
 fn finite(values: &[f64]) -> bool {
@@ -136,6 +186,8 @@ pub(crate) fn start(request: &ProbeRequest, shared: &Shared) -> Result<ProbePlan
         linear: false,
     }];
     let mut contacts = Vec::with_capacity(plan.len());
+    // On-the-fly touches: which, and their TCP at the contact.
+    let mut pressed_through = Vec::new();
     let mut push = |q: &[f64], duration_s: f64, linear: bool, waypoints: &mut Vec<Waypoint>| {
         time_s += duration_s;
         waypoints.push(Waypoint {
@@ -167,10 +219,12 @@ pub(crate) fn start(request: &ProbeRequest, shared: &Shared) -> Result<ProbePlan
                     false,
                     &mut waypoints,
                 );
+                // The retreat starts at rest on the surface: the ball leaves it at once.
                 contacts.push(Contact {
                     from_s: in_contact,
                     until_s: leaving,
                     at_s: in_contact,
+                    released_s: leaving,
                 });
                 push(&touch.q_approach, CONTACT_MOVE_S, false, &mut waypoints);
             }
@@ -185,13 +239,24 @@ pub(crate) fn start(request: &ProbeRequest, shared: &Shared) -> Result<ProbePlan
                     from_s,
                     until_s,
                     at_s,
+                    // Found once the whole path is known, below.
+                    released_s: until_s,
                 });
+                pressed_through.push((
+                    index,
+                    shared.chain.forward_unchecked(&touch.q_contact) * flange_from_tcp,
+                ));
                 push(&touch.q_approach, CONTACT_MOVE_S, false, &mut waypoints);
             }
         }
     }
     let motion = Motion::Path { waypoints };
     motion.check(&shared.limits)?;
+    for (index, contact) in pressed_through {
+        let pressed_s = contacts[index].until_s;
+        contacts[index].released_s =
+            released_s(shared, &motion, &flange_from_tcp, &contact, pressed_s);
+    }
     let end_s = time_s;
     shared.set_motion(motion);
     let reply = ProbePlan {
@@ -200,6 +265,10 @@ pub(crate) fn start(request: &ProbeRequest, shared: &Shared) -> Result<ProbePlan
         tilts_rad: plan.iter().map(|t| t.tilt_rad).collect(),
         touches: plan.len(),
     };
-    *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = Some(Schedule { contacts, end_s });
+    *shared.probe.lock().unwrap_or_else(|p| p.into_inner()) = Some(Schedule {
+        contacts,
+        end_s,
+        trigger_input: request.trigger_input,
+    });
     Ok(reply)
 }

@@ -1,7 +1,9 @@
 //! An RTDE server as a UR controller runs it on port 30004: protocol versions 1 and 2, the
 //! controller version of the simulated model, output recipes with NOT_FOUND for unknown names,
 //! data packages at the requested frequency clamped to the controller's maximum, several
-//! clients at once. Inputs are not simulated: every input name is answered NOT_FOUND.
+//! clients at once. RTDE inputs (what a client writes) are not simulated: every input name is
+//! answered NOT_FOUND. The controller's digital inputs are an output, `actual_digital_input_bits`,
+//! where the probe's trigger shows.
 
 use std::io::Write;
 use std::net::{TcpListener, TcpStream};

@@ -135,6 +135,8 @@ pub(crate) fn guarded(request: &[u8], handle: impl FnOnce(&[u8]) -> ServiceReply
 impl Service {
     pub(crate) fn serve(&mut self, rep: &ReplySocket, stop: &AtomicBool) {
         while !stop.load(Ordering::Relaxed) {
+            // Between requests, at least every receive timeout (100 ms).
+            self.capture_triggered();
             let request = match rep.receive() {
                 Wait::Request(request) => request,
                 Wait::Nothing => continue,
@@ -357,6 +359,7 @@ impl Service {
             qd: Some(sample.qd),
             stamp: Some(sample.controller_time),
             face: None,
+            trigger: None,
         };
         self.journal(&JournalEntry::Add {
             inspection: inspection.clone(),

@@ -8,6 +8,7 @@ fn inspection(id: u64) -> Inspection {
         qd: Some(vec![0.0; 6]),
         stamp: Some(id as f64),
         face: None,
+        trigger: None,
     }
 }
 

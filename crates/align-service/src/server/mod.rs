@@ -7,7 +7,9 @@
 //! `max_sample_age_s` (the stream stalled or the bridge lost its robot) or the tool moves faster
 //! than `max_tool_speed_m_s` (a touch is taken at rest). Every change to the inspection list is
 //! journaled ([`journal`]) before the reply, so an acknowledged inspection survives a crash; a
-//! restarted service replays the journal.
+//! restarted service replays the journal. With a touch-trigger probe (`Config::trigger`), each
+//! rising edge of its input captures an inspection at the edge's time without a `get`, through
+//! the same journal ([`trigger`]).
 //!
 //! `align-cloud` aligns the session's part (or a requested mesh) to a scanner cloud file named
 //! in the request; `diagnose` diagnoses the inspections in memory with the session's robot, tool
@@ -25,10 +27,12 @@
 //! thread and is never blocked by requests, so the live sample a `get` takes after a slow
 //! request is as fresh as ever.
 
+mod edges;
 mod files;
 mod handlers;
 mod journal;
 mod samples;
+mod trigger;
 
 pub use journal::JournalReport;
 
@@ -64,6 +68,10 @@ pub struct Config {
     /// Whether the session file's inspections start a new journal's list (true) or it starts
     /// empty; an existing journal's list wins either way.
     pub keep_session_inspections: bool,
+    /// The digital input a touch-trigger probe is wired to: while mirroring, each rising edge
+    /// captures an inspection at the edge's time (module `trigger`). `None`: touches are
+    /// captured by `get` only.
+    pub trigger: Option<protocol::DigitalInput>,
 }
 
 /// Why the service could not start.
@@ -264,8 +272,10 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     let mut threads = Vec::new();
     {
         let (samples, stop) = (Arc::clone(&samples), Arc::clone(&stop));
+        let mut trigger = config.trigger.map(edges::EdgeDetector::new);
+        let detect = move |sample: &samples::JointSample| trigger.as_mut()?.feed(sample);
         threads.push(thread::spawn(move || {
-            samples::subscribe_loop(sub, samples, stop)
+            samples::subscribe_loop(sub, samples, detect, stop)
         }));
     }
     let mut service = handlers::Service {

@@ -39,6 +39,13 @@ pub struct ServeArgs {
     /// start-up log says which list is in use).
     #[arg(long, value_enum, value_name = "WHAT", default_value_t = SessionInspections::Keep)]
     pub session_inspections: SessionInspections,
+    /// The digital input a touch-trigger probe is wired to (DI0-DI7 standard, CI0-CI7
+    /// configurable, TI0-TI1 tool inputs, as the hwState's `digital_inputs` bits 0-17). While
+    /// mirroring, each rising edge captures an inspection without a `get`, at the edge's
+    /// controller time: the midpoint of the samples around it, joints interpolated there
+    /// (worst case half a sample period off). Without it, only `get` captures.
+    #[arg(long, value_name = "INPUT")]
+    pub trigger: Option<protocol::DigitalInput>,
 }
 
 /// `--session-inspections`.
@@ -60,6 +67,7 @@ impl ServeArgs {
             max_tool_speed_m_s: self.max_tool_speed,
             data_dirs: self.data_dirs.clone(),
             keep_session_inspections: self.session_inspections == SessionInspections::Keep,
+            trigger: self.trigger,
         }
     }
 }

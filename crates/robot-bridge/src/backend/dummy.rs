@@ -167,6 +167,7 @@ impl DummyBackend {
             robot_mode: None,
             safety_mode: None,
             link: None,
+            digital_inputs: None,
         }
     }
 }

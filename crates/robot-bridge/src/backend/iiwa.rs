@@ -219,6 +219,7 @@ impl IiwaBackend {
                 .as_ref()
                 .and_then(|info| info.safety_state),
             link: Some(link),
+            digital_inputs: None,
         }))
     }
 }

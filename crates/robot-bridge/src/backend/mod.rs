@@ -26,6 +26,9 @@ pub struct Sample {
     pub safety_mode: Option<i32>,
     /// The link as the controller grades it, where the protocol says (FRI).
     pub link: Option<LinkState>,
+    /// The controller's digital inputs, one bit each (see `protocol::io`), where it offers
+    /// them (UR: RTDE `actual_digital_input_bits`).
+    pub digital_inputs: Option<u64>,
 }
 
 /// A controller's own view of the link (FRI session state and connection quality).

@@ -21,6 +21,7 @@ use protocol::RobotSide;
 
 use super::{Backend, BackendKind, BackendSettings, Event, OpenError, Sample};
 
+/// The outputs every sample needs, in the order `next_event` decodes them.
 const RECIPE: [&str; 7] = [
     "timestamp",
     "actual_q",
@@ -30,6 +31,9 @@ const RECIPE: [&str; 7] = [
     "robot_mode",
     "safety_mode",
 ];
+/// Asked for after [`RECIPE`] when the controller has it: the digital inputs (a touch-trigger
+/// probe's among them). A controller that answers NOT_FOUND streams without them.
+const DIGITAL_INPUTS: &str = "actual_digital_input_bits";
 
 /// Silence after which the controller counts as lost.
 pub const SILENCE_LIMIT: Duration = Duration::from_secs(2);
@@ -87,6 +91,8 @@ struct Connection {
     last_data: Instant,
     /// Bytes received but not yet a whole package: a read timeout may fall mid-package.
     pending: Vec<u8>,
+    /// Whether the recipe has [`DIGITAL_INPUTS`], after the required outputs.
+    digital_inputs: bool,
 }
 
 impl Connection {
@@ -191,42 +197,50 @@ impl UrBackend {
         let major = parts.first().copied().unwrap_or(0);
         // CB3 controllers (3.x) stream at most 125 Hz, e-Series (5.x) 500 Hz.
         let frequency = if major >= 5 { 500.0 } else { 125.0 };
-        let setup = setup_outputs_request((version >= 2).then_some(frequency), &RECIPE);
-        setup.write_to(&mut stream)?;
-        let (recipe, types) = parse_setup_reply(
-            &read_reply(&mut stream, package::CONTROL_PACKAGE_SETUP_OUTPUTS)?,
-            version,
-        )?;
-        if let Some(missing) = types.iter().position(Option::is_none) {
-            return Err(std::io::Error::other(format!(
-                "the controller does not know output '{}' (NOT_FOUND)",
-                RECIPE[missing]
-            ))
-            .into());
+        let rate = (version >= 2).then_some(frequency);
+        let mut names = RECIPE.to_vec();
+        names.push(DIGITAL_INPUTS);
+        let mut types = setup_recipe(&mut stream, version, rate, &names)?;
+        let digital_inputs = types.last().is_some_and(Option::is_some);
+        if !digital_inputs {
+            // One NOT_FOUND spoils the whole recipe: ask again for the required outputs alone.
+            names.pop();
+            types = setup_recipe(&mut stream, version, rate, &names)?;
         }
-        if version >= 2 && recipe == 0 {
-            return Err(std::io::Error::other("the controller refused the output recipe").into());
-        }
+        let types = match types.into_iter().collect::<Option<Vec<ValueType>>>() {
+            Some(types) => types,
+            None => {
+                return Err(
+                    std::io::Error::other("the controller refused the output recipe").into(),
+                );
+            }
+        };
         Package::new(package::CONTROL_PACKAGE_START, Vec::new()).write_to(&mut stream)?;
         if read_reply(&mut stream, package::CONTROL_PACKAGE_START)?.first_byte()? != 1 {
             return Err(std::io::Error::other("the controller refused to start streaming").into());
         }
         let description = format!(
-            "RTDE v{version} to {} (controller {}), {frequency} Hz",
+            "RTDE v{version} to {} (controller {}), {frequency} Hz, {}",
             self.address,
             parts
                 .iter()
                 .map(u32::to_string)
                 .collect::<Vec<_>>()
-                .join(".")
+                .join("."),
+            if digital_inputs {
+                "with digital inputs"
+            } else {
+                "without digital inputs (the controller has no actual_digital_input_bits)"
+            }
         );
         Ok((
             Connection {
                 stream,
                 version,
-                types: types.into_iter().flatten().collect(),
+                types,
                 last_data: Instant::now(),
                 pending: Vec::new(),
+                digital_inputs,
             },
             description,
         ))
@@ -257,6 +271,41 @@ pub fn read_kinematics(
         dh_alpha: info.dh_alpha.to_vec(),
         hash: Some(info.calibration_hash()),
     })
+}
+
+/// Sets up an output recipe of `names` and returns their types, NOT_FOUND as `None`; an error
+/// when a required output ([`RECIPE`]) is missing or the controller refuses a complete recipe.
+fn setup_recipe(
+    stream: &mut TcpStream,
+    version: u16,
+    frequency_hz: Option<f64>,
+    names: &[&str],
+) -> Result<Vec<Option<ValueType>>, RtdeError> {
+    setup_outputs_request(frequency_hz, names).write_to(stream)?;
+    let (recipe, types) = parse_setup_reply(
+        &read_reply(stream, package::CONTROL_PACKAGE_SETUP_OUTPUTS)?,
+        version,
+    )?;
+    if types.len() != names.len() {
+        return Err(std::io::Error::other(format!(
+            "the controller answered {} types for {} outputs",
+            types.len(),
+            names.len()
+        ))
+        .into());
+    }
+    if let Some(missing) = types[..RECIPE.len()].iter().position(Option::is_none) {
+        return Err(std::io::Error::other(format!(
+            "the controller does not know output '{}' (NOT_FOUND)",
+            RECIPE[missing]
+        ))
+        .into());
+    }
+    let complete = types.iter().all(Option::is_some);
+    if complete && version >= 2 && recipe == 0 {
+        return Err(std::io::Error::other("the controller refused the output recipe").into());
+    }
+    Ok(types)
 }
 
 /// Reads packages until one of `kind` arrives (text messages and stray data are skipped).
@@ -336,6 +385,10 @@ impl Backend for UrBackend {
                         robot_mode: Some(values[5][0] as i32),
                         safety_mode: Some(values[6][0] as i32),
                         link: None,
+                        // UINT64 decoded as f64: exact for the 18 bits a controller sets.
+                        digital_inputs: connection
+                            .digital_inputs
+                            .then(|| values[RECIPE.len()][0] as u64),
                     })),
                     Err(error) => Some(self.lose(format!("malformed data package: {error}"))),
                 }

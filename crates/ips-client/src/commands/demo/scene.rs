@@ -205,6 +205,7 @@ impl Scene {
             // late sample is the same sample; at one speed it looks like a larger ball).
             on_the_fly_speeds_m_s: (effect == SimulatedEffect::Modelled(Effect::TriggerLatency))
                 .then(|| vec![0.001, 0.0025, 0.004]),
+            trigger_input: protocol::DigitalInput::DI0,
         };
         Ok(Self {
             base_from_part_truth: truth,
