@@ -190,13 +190,17 @@ fn example_session_reports_the_pose_uncertainty() {
 
     let text = align_text(&session);
     let lines: Vec<&str> = text.lines().collect();
-    assert!(lines[1].contains("residual rms"), "{text}");
     assert!(
-        lines[2].starts_with("95% confidence (noise sigma 0.0500 mm, declared): position +-"),
+        lines[1].starts_with("  = xyz [mm] 620.000 -250.000 20.000, rpy [deg]"),
         "{text}"
     );
-    assert!(lines[2].contains("mm (x/y/z), rotation +-"), "{text}");
-    assert!(lines[3].trim_start().starts_with("weakest: "), "{text}");
+    assert!(lines[2].contains("residual rms"), "{text}");
+    assert!(
+        lines[3].starts_with("95% confidence (noise sigma 0.0500 mm, declared): position +-"),
+        "{text}"
+    );
+    assert!(lines[3].contains("mm (x/y/z), rotation +-"), "{text}");
+    assert!(lines[4].trim_start().starts_with("weakest: "), "{text}");
 }
 
 #[test]
