@@ -14,8 +14,11 @@ fn scratch_session(name: &str) -> PathBuf {
     session["robot"]["urdf"] =
         serde_json::json!(example.join("../../robots/ur10.urdf").to_str().unwrap());
     session["part"]["mesh"] = serde_json::json!(example.join("step_block.stl").to_str().unwrap());
+    // One folder per call: tests run in parallel and each removes its own when it ends.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let folder = std::env::temp_dir().join(format!(
-        "cobot-align-diagnose-{}-{name}",
+        "cobot-align-diagnose-{}-{call}-{name}",
         std::process::id()
     ));
     std::fs::create_dir_all(&folder).unwrap();
@@ -216,5 +219,71 @@ fn apply_refuses_a_session_with_nothing_to_apply_and_bad_corrections() {
         &|s| s["robot"]["joint_compliance"] = serde_json::json!("stiff"),
         "invalid type: string \"stiff\"",
     );
+    let _ = std::fs::remove_dir_all(folder);
+}
+
+/// The residual plot: titles that fit its width, bars of at least 2 px even for a zero
+/// residual, and a caption that says nothing was applied when the verdict applies nothing (the
+/// example's head-on touches alone cannot tell the ball radius from the TCP length).
+#[test]
+fn the_residual_plot_fits_its_titles_shows_every_bar_and_says_what_was_applied() {
+    let heights = |svg: &str| -> Vec<f64> {
+        svg.lines()
+            .filter(|l| l.starts_with("<rect x=") && l.contains("<title>"))
+            .map(|l| {
+                let at = l.find("height=\"").unwrap() + 8;
+                l[at..].split('"').next().unwrap().parse().unwrap()
+            })
+            .collect()
+    };
+    let path = scratch_session("session_probe_radius.json");
+    let folder = path.parent().unwrap().to_owned();
+    let result = diagnose(&path);
+    let plot = std::fs::read_to_string(result["plot"].as_str().unwrap()).unwrap();
+    let width: f64 = plot
+        .split("width=\"")
+        .nth(1)
+        .unwrap()
+        .split('"')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    for title in plot
+        .lines()
+        .filter(|l| l.starts_with("<text x=\"10\" y=\""))
+    {
+        let text = title.split('>').nth(1).unwrap().split('<').next().unwrap();
+        assert!(
+            10.0 + 7.0 * text.chars().count() as f64 <= width,
+            "'{text}' in {width} px"
+        );
+    }
+    assert!(plot.contains("Verdict: effect; after = modelling probe_radius"));
+    // The after bars of a fully explained residual are zero: still drawn.
+    assert!(
+        heights(&plot).iter().all(|h| *h >= 2.0),
+        "{:?}",
+        heights(&plot)
+    );
+
+    let mut session: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let head_on: Vec<serde_json::Value> = session["inspections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .step_by(3)
+        .cloned()
+        .collect();
+    session["inspections"] = serde_json::Value::Array(head_on);
+    let ambiguous_path = path.with_file_name("head_on.json");
+    std::fs::write(&ambiguous_path, session.to_string()).unwrap();
+    let result = diagnose(&ambiguous_path);
+    assert_eq!(result["verdict"], "ambiguous", "{result}");
+    let plot = std::fs::read_to_string(result["plot"].as_str().unwrap()).unwrap();
+    assert!(plot.contains("nothing applied"), "{plot}");
+    assert!(!plot.contains("modelling"), "{plot}");
+    assert!(plot.contains("No effect applied (verdict ambiguous)"));
     let _ = std::fs::remove_dir_all(folder);
 }

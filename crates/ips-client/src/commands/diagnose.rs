@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use align_core::diagnosis::{Diagnosis, TouchSample};
+use align_core::diagnosis::{Diagnosis, TouchSample, Verdict};
 use align_core::io::export::ExportFormat;
 use align_core::pose::isometry_from_xyz_rpy;
 use align_service::jobs::apply::apply_effect;
@@ -171,10 +171,32 @@ const SCATTER_HEIGHT: f64 = 320.0;
 /// touch's residual against what the chosen effect explains of it (on the diagonal when the
 /// effect accounts for the residual).
 fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
+    let applied = applied_effect(diagnosis);
+    let titles = [
+        "Residual per touch (mm): before (grey), after (blue); green band = +-2 sigma".to_owned(),
+        match (applied, &diagnosis.effect) {
+            (Some(name), _) => format!(
+                "Verdict: {}; after = modelling {name}",
+                diagnosis.verdict.name()
+            ),
+            (None, Some((name, _))) => format!(
+                "Verdict: {}; nothing applied (best candidate {name}): after = before",
+                diagnosis.verdict.name()
+            ),
+            (None, None) => format!(
+                "Verdict: {}; nothing applied: after = before",
+                diagnosis.verdict.name()
+            ),
+        },
+    ];
+    // Wide enough for the longest title (about 7 px per character at 12 px sans-serif).
+    let longest_title = titles.iter().map(|t| t.chars().count()).max().unwrap_or(0);
     let (width, height, margin) = (
-        (80.0 + 40.0 * samples.len() as f64).max(2.0 * SCATTER_HEIGHT),
-        320.0,
-        40.0,
+        (80.0 + 40.0 * samples.len() as f64)
+            .max(2.0 * SCATTER_HEIGHT)
+            .max(20.0 + 7.0 * longest_title as f64),
+        340.0,
+        50.0,
     );
     let largest = diagnosis
         .before
@@ -184,19 +206,15 @@ fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
         .fold(3.0 * sigma, |m, r| m.max(r.abs()));
     let y = |value: f64| height / 2.0 - value / largest * (height / 2.0 - margin);
     let mut out = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n\
          <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
-         <text x=\"10\" y=\"18\">Residual per touch (mm): before (grey), after {} (blue); band = +-2 sigma. Verdict: {}</text>\n\
+         <text x=\"10\" y=\"18\">{}</text>\n\
+         <text x=\"10\" y=\"34\">{}</text>\n\
          <rect x=\"{margin}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#e8f0e8\"/>\n\
          <line x1=\"{margin}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\"/>\n",
         height + SCATTER_HEIGHT,
-        diagnosis
-            .effect
-            .as_ref()
-            .map_or("(no effect applied)".to_owned(), |(n, _)| format!(
-                "modelling {n}"
-            )),
-        diagnosis.verdict.name(),
+        titles[0],
+        titles[1],
         y(2.0 * sigma),
         width - 2.0 * margin,
         y(-2.0 * sigma) - y(2.0 * sigma),
@@ -210,15 +228,21 @@ fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
             (-6.0, diagnosis.before.residuals_m[i], "#999"),
             (6.0, diagnosis.after.residuals_m[i], "#2a6fdb"),
         ] {
-            let (top, bottom) = if value >= 0.0 {
+            let (mut top, mut bottom) = if value >= 0.0 {
                 (y(value), y(0.0))
             } else {
                 (y(0.0), y(value))
             };
+            // A residual near zero still shows as a bar of MIN_BAR_PX about the axis: a bar
+            // thinner than a pixel reads as a missing one.
+            if bottom - top < MIN_BAR_PX {
+                let middle = (top + bottom) / 2.0;
+                (top, bottom) = (middle - MIN_BAR_PX / 2.0, middle + MIN_BAR_PX / 2.0);
+            }
             out += &format!(
                 "<rect x=\"{:.1}\" y=\"{top:.1}\" width=\"10\" height=\"{:.1}\" fill=\"{colour}\"><title>{} {:+.4} mm</title></rect>\n",
                 x + offset - 5.0,
-                (bottom - top).max(0.5),
+                bottom - top,
                 sample.id,
                 value * 1e3
             );
@@ -246,11 +270,24 @@ fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
 }
 
 /// The lower panel: residual before (y) against the part the effect explains (x), both mm.
+/// The effect the diagnosis applied: its best candidate only when the verdict is `effect` (an
+/// ambiguous or unattributable verdict names a candidate but applies nothing).
+fn applied_effect(diagnosis: &Diagnosis) -> Option<&str> {
+    match (&diagnosis.effect, diagnosis.verdict) {
+        (Some((name, _)), Verdict::Effect) => Some(name.as_str()),
+        _ => None,
+    }
+}
+
+/// Smallest drawn bar, px.
+const MIN_BAR_PX: f64 = 2.0;
+
 fn scatter(diagnosis: &Diagnosis, samples: &[TouchSample], largest: f64, top: f64) -> String {
-    let Some((name, _)) = diagnosis.effect.as_ref() else {
+    let Some(name) = applied_effect(diagnosis) else {
         return format!(
-            "<text x=\"10\" y=\"{:.1}\">No effect applied: nothing to plot against.</text>\n",
-            top + 30.0
+            "<text x=\"10\" y=\"{:.1}\">No effect applied (verdict {}): nothing to plot against.</text>\n",
+            top + 30.0,
+            diagnosis.verdict.name()
         );
     };
     let (left, size) = (60.0, SCATTER_HEIGHT - 60.0);
