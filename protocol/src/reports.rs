@@ -135,6 +135,24 @@ pub struct CloudReport {
     pub final_delta: f64,
     pub starts: usize,
     pub notes: Vec<String>,
+    /// True when another pose fits the scan as well (a symmetric part, or too little seen).
+    #[serde(default)]
+    pub ambiguous: bool,
+    /// How clearly the pose beats the best different pose the search found; absent for a
+    /// local alignment or when no other pose was found.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uniqueness: Option<CloudUniqueness>,
+}
+
+/// The pose's consensus score (keypoints on the part's surface, less those inside it) against
+/// the runner-up's, a different pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CloudUniqueness {
+    pub score: f64,
+    pub runner_up_score: f64,
+    /// (score - runner-up's) / score.
+    pub margin: f64,
+    pub runner_up: Pose,
 }
 
 /// The diagnosis of a session's residual (DESIGN.md 6.4).

@@ -220,3 +220,52 @@ fn bad_inputs_are_refused_with_the_reason() {
         "{message}"
     );
 }
+
+/// The exploration's ends also say how clearly the pose wins: a plain box (half a turn about an
+/// axis through its centre gives the same box) is reported ambiguous with a twin as the
+/// runner-up and its centre where the truth has it, while the step block, whose step tells every
+/// turn apart, is found with a clear margin.
+#[test]
+fn a_symmetric_part_is_ambiguous_and_an_asymmetric_one_unique() {
+    let box_mesh = extrude(&[[0.0, 0.0], [0.2, 0.0], [0.2, 0.1], [0.0, 0.1]], 0.15).unwrap();
+    for (name, mesh, expect_ambiguous) in
+        [("box", box_mesh, true), ("step block", step_block(), false)]
+    {
+        let truth = truth();
+        let cloud = cluttered_scan(&mesh, &truth);
+        // A start off by 200 mm (the thesis's scheme).
+        let mut rng = TrialRng::new(5);
+        let displacement = random_displacement(&mut rng, 0.2, mesh.radius_m());
+        let start = displace_about_centroid(&truth, &mesh, &displacement);
+        let result = align_cloud(&mesh, &cloud, &start, 0.2, &PcaOptions::default()).unwrap();
+        let found = result.uniqueness.clone().expect("the exploration ran");
+        println!(
+            "{name}: score {:.0}, runner-up {:.0}, margin {:.3}, ambiguous {}; pose off the truth by {:?}, runner-up by {:?}",
+            found.score,
+            found.runner_up_score,
+            found.margin,
+            found.ambiguous,
+            errors(&result.alignment.base_from_part, &truth),
+            errors(&found.runner_up, &truth)
+        );
+        assert_eq!(found.ambiguous, expect_ambiguous, "{name}: {found:?}");
+        if expect_ambiguous {
+            // A twin: the box turned half a turn about an axis through its centre, the same
+            // surface to within the scan's noise.
+            let (_, turn) = errors(&found.runner_up, &result.alignment.base_from_part);
+            assert!(turn > 1.0, "{name}: runner-up only {turn} rad away");
+            let (shift, _) = errors(&result.alignment.base_from_part, &truth);
+            let twin_shift = (result.alignment.base_from_part * mesh.centroid()
+                - truth * mesh.centroid())
+            .norm();
+            assert!(
+                twin_shift < 2e-3,
+                "{name}: {shift} m, centre {twin_shift} m off"
+            );
+        } else {
+            let (shift, turn) = errors(&result.alignment.base_from_part, &truth);
+            assert!(shift < 1e-3 && turn < 1e-2, "{name}: {shift} m, {turn} rad");
+            assert!(found.margin > 0.05, "{name}: margin {}", found.margin);
+        }
+    }
+}

@@ -168,7 +168,30 @@ pub struct PcaResult {
     pub keypoints: usize,
     pub kept: usize,
     pub final_delta_m: f64,
+    /// How clearly the pose beats the best different pose the exploration found; `None` without
+    /// an exploration (a local run) or when every run ended at this pose.
+    pub uniqueness: Option<Uniqueness>,
 }
+
+/// The pose's score (the consensus: coarse keypoints within a band of the part's surface, less
+/// those inside it) against the best-scoring end of the exploration that is a different pose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Uniqueness {
+    pub score: f64,
+    pub runner_up_score: f64,
+    pub runner_up: Isometry3<f64>,
+    /// (score - runner-up's) / score.
+    pub margin: f64,
+    /// True when the runner-up scores within the scores' sampling noise (2 sqrt(score)) of the
+    /// pose: the scan cannot tell the two apart (a symmetric part, or too little of it seen).
+    pub ambiguous: bool,
+}
+
+/// Two ends of the exploration are the same pose unless some point of the part lies this far
+/// apart, as a fraction of the part's radius. The score cannot tell poses within its band (a
+/// centimetre) apart, and the short runs end up to a centimetre or two off the optimum; a twin
+/// of a symmetric part (a quarter or half turn) moves its points by one or two radii.
+const SAME_POSE_FRACTION_OF_RADIUS: f64 = 0.3;
 
 fn delta_at(iteration: usize, delta0: f64, options: &PcaOptions) -> f64 {
     let delta_min = options.delta_min_m.min(delta0);
@@ -237,15 +260,39 @@ pub fn align_cloud(
     let mut start = *base_from_part_start;
     let mut starts = 1;
     let mut schedule_from = delta0_m;
+    let mut explored_ends: Vec<(f64, Isometry3<f64>)> = Vec::new();
     if options.starts > 0 {
         let (scored, explored) = explore(mesh, cloud, base_from_part_start, delta0_m, options);
         start = scored.first().map_or(start, |(_, pose)| *pose);
+        explored_ends = scored;
         starts += explored;
         // The exploration ended within a few voxels of its optimum: refining from a wide band
         // again would only let the clutter back in.
         schedule_from = delta0_m.min(3.0 * options.delta_min_m);
     }
-    let run = run_schedule(mesh, &keypoints, &start, schedule_from, options);
+    let mut run = run_schedule(mesh, &keypoints, &start, schedule_from, options);
+    let mut uniqueness_found = None;
+    if options.starts > 0 {
+        // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
+        // other pose) that no run from the start reached shows up here, and so does a better
+        // pose the exploration from the start missed. A twin turned about the part's centre
+        // fills nearly the same space: a band of half the part's radius keeps the clutter out.
+        let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
+        let band = delta0_m.min(0.5 * mesh.radius_m());
+        let (around, _) = explore_turns(mesh, cloud, &run.pose, max_angle, band, options);
+        let (coarse, score_band) = exploration_scoring(cloud, options);
+        let found_score = consensus(mesh, &coarse, &run.pose, score_band);
+        if let Some((better_score, better)) = around.first()
+            && *better_score > found_score + 2.0 * found_score.max(0.0).sqrt()
+        {
+            let again = run_schedule(mesh, &keypoints, better, schedule_from, options);
+            if consensus(mesh, &coarse, &again.pose, score_band) > found_score {
+                run = again;
+            }
+        }
+        explored_ends.extend(around);
+        uniqueness_found = uniqueness(mesh, cloud, &run.pose, &explored_ends, options);
+    }
     let final_matches = correspond(
         mesh,
         &keypoints,
@@ -270,7 +317,51 @@ pub fn align_cloud(
         keypoints: keypoints.len(),
         kept: final_matches.len(),
         final_delta_m: run.delta,
+        uniqueness: uniqueness_found,
     })
+}
+
+/// The pose against the best exploration end that is a different pose, scored alike.
+fn uniqueness(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    ends: &[(f64, Isometry3<f64>)],
+    options: &PcaOptions,
+) -> Option<Uniqueness> {
+    let (coarse, band) = exploration_scoring(cloud, options);
+    let same = SAME_POSE_FRACTION_OF_RADIUS * mesh.radius_m();
+    let centre = mesh.centroid();
+    let (runner_up_score, runner_up) = ends
+        .iter()
+        .filter(|(_, end)| {
+            // Apart by more than `same` at the centre or at the part's radius.
+            let shift = (end * centre - pose * centre).norm();
+            let turn = end.rotation.angle_to(&pose.rotation) * mesh.radius_m();
+            shift.max(turn) > same
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))?;
+    let score = consensus(mesh, &coarse, pose, band).max(*runner_up_score);
+    let margin = if score > 0.0 {
+        (score - runner_up_score) / score
+    } else {
+        0.0
+    };
+    Some(Uniqueness {
+        score,
+        runner_up_score: *runner_up_score,
+        runner_up: *runner_up,
+        margin,
+        ambiguous: score - runner_up_score <= 2.0 * score.max(0.0).sqrt(),
+    })
+}
+
+/// The coarse keypoints and the band the exploration scores its runs with.
+fn exploration_scoring(cloud: &[Point3<f64>], options: &PcaOptions) -> (Vec<Point3<f64>>, f64) {
+    (
+        voxel_representatives(cloud, options.voxel_m * 3.0),
+        (options.voxel_m * 2.0).max(options.delta_min_m * 0.3),
+    )
 }
 
 struct ScheduleRun {
@@ -387,15 +478,27 @@ fn explore(
     delta0_m: f64,
     options: &PcaOptions,
 ) -> (Vec<(f64, Isometry3<f64>)>, usize) {
-    let coarse = voxel_representatives(cloud, options.voxel_m * 3.0);
+    let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
+    explore_turns(mesh, cloud, start, max_angle, delta0_m, options)
+}
+
+/// The runs of [`explore`] from `start` turned by up to `max_angle` (rad), each from a band of
+/// `delta0_m`.
+fn explore_turns(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    max_angle: f64,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> (Vec<(f64, Isometry3<f64>)>, usize) {
+    let (coarse, band) = exploration_scoring(cloud, options);
     let short = PcaOptions {
         max_iterations: 40,
         window: 3,
         tolerance_m: 1e-5,
         ..options.clone()
     };
-    let band = (options.voxel_m * 2.0).max(options.delta_min_m * 0.3);
-    let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
     let centre = mesh.centroid();
     let about_centre = Isometry3::translation(centre.x, centre.y, centre.z);
     let mut candidates = vec![*start];

@@ -11,11 +11,11 @@ use align_core::pose::isometry_from_xyz_rpy;
 use align_core::registration::pca::{DeltaSchedule, PcaOptions, PcaStep, align_cloud};
 use nalgebra::Isometry3;
 use protocol::AlignCloudRequest;
-use protocol::reports::CloudReport;
+use protocol::reports::{CloudReport, CloudUniqueness};
 use protocol::session::PartSection;
 
 use crate::BadInput;
-use crate::jobs::align::summary;
+use crate::jobs::align::{report_pose, summary};
 use crate::jobs::units::{extent_m, refuse_unit_mismatch, unit_hints, with_hints};
 
 /// The start pose's error bound a service request gets when it names none, m. A hand-placed
@@ -126,5 +126,12 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
         final_delta: result.final_delta_m,
         starts: result.alignment.starts,
         notes: mesh.notes_with_unit_scale(job.mesh_scale),
+        ambiguous: result.uniqueness.as_ref().is_some_and(|u| u.ambiguous),
+        uniqueness: result.uniqueness.as_ref().map(|u| CloudUniqueness {
+            score: u.score,
+            runner_up_score: u.runner_up_score,
+            margin: u.margin,
+            runner_up: report_pose(&u.runner_up),
+        }),
     })
 }

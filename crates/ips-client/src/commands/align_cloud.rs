@@ -151,6 +151,21 @@ pub fn to_text(report: &CloudReport) -> String {
         report.alignment.rms * 1e3,
         report.alignment.max * 1e3
     );
+    if let Some(found) = &report.uniqueness {
+        let [x, y, z] = found.runner_up.xyz;
+        let [roll, pitch, yaw] = found.runner_up.rpy;
+        text += &format!(
+            "{}: score {:.0} against {:.0} for the best other pose (margin {:.1} %): xyz {x:.6} {y:.6} {z:.6}, rpy {roll:.4} {pitch:.4} {yaw:.4}\n",
+            if report.ambiguous {
+                "AMBIGUOUS: another pose fits the scan as well (a symmetric part, or too little of it seen)"
+            } else {
+                "unique"
+            },
+            found.score,
+            found.runner_up_score,
+            found.margin * 100.0
+        );
+    }
     for note in &report.notes {
         text += &format!("note: {note}\n");
     }
