@@ -99,7 +99,7 @@ impl Scene {
                 vertices,
                 triangles: loaded.mesh.triangles().to_vec(),
             },
-            nominal_pose: loaded.file.part.nominal_pose.clone(),
+            nominal_pose: loaded.file.part.nominal_pose,
             tip_radius_m: loaded.tool.tip_radius_m,
         };
         Ok(Self {
