@@ -4,7 +4,7 @@
 # (after scripts/python-env.sh made it). Idempotent.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-SELENIUM_VERSION=4.52.0
+SELENIUM_VERSION=4.27.1
 if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null

@@ -143,7 +143,9 @@ export function createTwin(canvas) {
     ghost.add(edges);
     parts.add(ghost, aligned);
     view.target.set(...doc.nominal_pose.xyz);
-    view.distance = Math.max(0.6, 2.2 * new THREE.Box3().setFromBufferAttribute(geometry.attributes.position).getSize(new THREE.Vector3()).length() + 0.8);
+    // Close enough that the part and the touches fill the view; the arm reaches in from the side.
+    const size_m = new THREE.Box3().setFromBufferAttribute(geometry.attributes.position).getSize(new THREE.Vector3()).length();
+    view.distance = Math.max(0.5, 3 * size_m + 0.3);
     redraw();
   }
 
