@@ -153,7 +153,7 @@ export function createTwin(canvas) {
     touches.clear();
     const values = [...residuals.values()].map(Math.abs);
     const scale = Math.max(1e-4, ...values);
-    const sphere = new THREE.SphereGeometry(Math.max(tipRadius, 0.004), 16, 12);
+    const sphere = new THREE.SphereGeometry(Math.max(tipRadius, 0.006), 16, 12);
     for (const touch of state.touches) {
       const colour = residuals.has(touch.id) ? residualColour(residuals.get(touch.id), scale) : UNALIGNED_TOUCH;
       const marker = new THREE.Mesh(sphere, new THREE.MeshStandardMaterial({ color: colour }));

@@ -118,3 +118,34 @@ pub fn local_endpoint(bound: &str) -> String {
     }
     bound.to_owned()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_service_bound_on_every_interface_is_reached_on_loopback() {
+        assert_eq!(local_endpoint("tcp://0.0.0.0:4000"), "tcp://127.0.0.1:4000");
+        assert_eq!(local_endpoint("tcp://*:4000"), "tcp://127.0.0.1:4000");
+        assert_eq!(local_endpoint("tcp://[::]:4000"), "tcp://127.0.0.1:4000");
+        assert_eq!(
+            local_endpoint("tcp://192.168.1.10:4000"),
+            "tcp://192.168.1.10:4000"
+        );
+    }
+
+    #[tokio::test]
+    async fn a_service_that_does_not_answer_is_a_timeout_and_the_next_call_tries_again() {
+        // A bound ROUTER that never replies: the REQ's send succeeds, its receive times out.
+        let context = zmq::Context::new();
+        let silent = context.socket(zmq::ROUTER).unwrap();
+        silent.set_linger(0).unwrap();
+        silent.bind("tcp://127.0.0.1:*").unwrap();
+        let endpoint = silent.get_last_endpoint().unwrap().unwrap();
+        let link = ServiceLink::connect(&endpoint, Duration::from_millis(100));
+        for _ in 0..2 {
+            let error = link.call(ServiceCommand::Status).await.unwrap_err();
+            assert!(matches!(error, LinkError::NoReply { .. }), "{error}");
+        }
+    }
+}
