@@ -123,8 +123,8 @@ impl Shared {
     }
 }
 
-/// Polls the service until the process ends, publishing the status every time and the state
-/// when it changed.
+/// Polls the service until the process ends while any page follows the events, publishing the
+/// status every time and the state when it changed.
 pub async fn poll(shared: Arc<Shared>) {
     let mut ticks = tokio::time::interval(POLL_PERIOD);
     ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -132,6 +132,10 @@ pub async fn poll(shared: Arc<Shared>) {
         tokio::select! {
             _ = ticks.tick() => {}
             () = shared.changed.notified() => {}
+        }
+        // Nobody follows the events: no need to keep the service busy answering.
+        if shared.status.receiver_count() == 0 {
+            continue;
         }
         let status = match shared.fetch_status().await {
             Ok(status) => StatusDocument {
