@@ -135,6 +135,13 @@ fn the_page_drives_the_service_and_follows_other_clients() {
     });
     assert_eq!(with_result["result"]["report"]["rms"].as_f64(), Some(rms));
 
+    // Diagnose through the page: the DESIGN 6.4 document, and it becomes the result shown.
+    let diagnosed = command(addr, json!({"command": "diagnose"}));
+    assert_eq!(diagnosed.status, 200, "{}", diagnosed.body);
+    assert!(diagnosed.json()["data"]["verdict"].is_string());
+    let state = get(addr, "/api/state").json();
+    assert_eq!(state["state"]["result"]["command"], "diagnose");
+
     // Remove through the page, and the service agrees.
     let removed = command(addr, json!({"command": "remove", "ids": [first]}));
     assert_eq!(removed.status, 200, "{}", removed.body);

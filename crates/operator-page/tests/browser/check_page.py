@@ -1,6 +1,7 @@
 """Drives the operator page in a real headless Chromium (Debian's chromium and chromium-driver,
 scripts/browser-env.sh) through Selenium: no console errors, the WebGL twin drawn (not a blank
-canvas), Get adds a `data-inspection-id` element, Align puts the rms in mm in #result.
+canvas), Get adds a `data-inspection-id` element, Align puts the rms in mm in #result, and at a
+tablet's 800 px width nothing scrolls sideways and the buttons are finger-sized.
 
     python check_page.py URL SCREENSHOT.png EXPECTED_INSPECTIONS
 
@@ -87,6 +88,17 @@ def main():
         wait.until(lambda d: d.execute_script(COUNT_COLOURS) > 20)
         colours = driver.execute_script(COUNT_COLOURS)
         driver.save_screenshot(screenshot)
+        # A tablet held upright: no sideways scrolling, buttons big enough for a finger.
+        driver.set_window_size(800, 1280)
+        wait.until(lambda d: d.execute_script("return window.innerWidth") <= 800)
+        overflow = driver.execute_script("return document.documentElement.scrollWidth - window.innerWidth")
+        if overflow > 0:
+            raise SystemExit(f"the page scrolls sideways by {overflow} px at 800 px wide")
+        smallest = driver.execute_script(
+            "return Math.min(...[...document.querySelectorAll('button[data-command]')].map((b) => b.getBoundingClientRect().height));"
+        )
+        if smallest < 44:
+            raise SystemExit(f"a command button is {smallest} px high: too small to touch")
         errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
         if errors:
             raise SystemExit(f"console errors: {errors}")
