@@ -189,10 +189,38 @@ fn router(shared: Arc<Shared>) -> Router {
         .with_state(shared)
 }
 
+/// Whether a `Host` header names this server by IP address or as localhost. A name that could
+/// be any other (DNS rebinding: a web site whose name suddenly resolves to 127.0.0.1) is not
+/// trusted with commands, since the browser would then treat the page's origin as that site's.
+fn trusted_host(host: &str) -> bool {
+    let name = match host.rsplit_once(':') {
+        // `[::1]:8080`, `127.0.0.1:8080`, `localhost:8080`; a bare IPv6 literal has colons too.
+        Some((name, port)) if port.bytes().all(|b| b.is_ascii_digit()) && !name.is_empty() => name,
+        _ => host,
+    };
+    let name = name
+        .strip_prefix('[')
+        .and_then(|n| n.strip_suffix(']'))
+        .unwrap_or(name);
+    name.eq_ignore_ascii_case("localhost") || name.parse::<std::net::IpAddr>().is_ok()
+}
+
 /// `POST /api/command`, after the checks on the body itself: JSON only (a browser sends a
 /// cross-site JSON post only after a preflight this server never grants, so another site the
 /// operator visits cannot press the page's buttons), at most [`api::MAX_COMMAND_BYTES`].
 async fn command(State(shared): State<Arc<Shared>>, headers: HeaderMap, body: Body) -> Response {
+    let host = headers
+        .get(header::HOST)
+        .and_then(|value| value.to_str().ok())
+        .unwrap_or_default();
+    if !trusted_host(host) {
+        return api::refusal(
+            StatusCode::FORBIDDEN,
+            format!(
+                "commands are taken only from the page opened by IP address or localhost, not '{host}'"
+            ),
+        );
+    }
     let json = headers
         .get(header::CONTENT_TYPE)
         .and_then(|value| value.to_str().ok())
@@ -213,4 +241,31 @@ async fn command(State(shared): State<Arc<Shared>>, headers: HeaderMap, body: Bo
         );
     };
     api::command(State(shared), bytes).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::trusted_host;
+
+    #[test]
+    fn commands_are_trusted_from_ip_addresses_and_localhost_only() {
+        for host in [
+            "127.0.0.1:8080",
+            "192.168.1.10:8080",
+            "[::1]:8080",
+            "localhost:8080",
+            "LOCALHOST",
+            "10.0.0.2",
+        ] {
+            assert!(trusted_host(host), "{host}");
+        }
+        for host in [
+            "evil.example:8080",
+            "evil.example",
+            "",
+            "127.0.0.1.nip.io:8080",
+        ] {
+            assert!(!trusted_host(host), "{host}");
+        }
+    }
 }

@@ -226,6 +226,10 @@ fn bad_requests_are_refused_with_a_reason_and_the_page_keeps_serving() {
         no_data.body
     );
     assert_eq!(get(addr, "/nowhere").status, 404);
+    // A page under another name (DNS rebinding) cannot press the buttons.
+    let rebound = common::http_with_host(addr, "evil.example:8080", br#"{"command":"reset"}"#);
+    assert_eq!(rebound.status, 403, "{}", rebound.body);
+    assert!(reason(&rebound).contains("evil.example"));
 
     // Still serving.
     let state = get(addr, "/api/state");

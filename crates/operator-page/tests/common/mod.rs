@@ -173,12 +173,35 @@ pub fn http(
     content_type: Option<&str>,
     body: &[u8],
 ) -> Response {
+    request(addr, &addr.to_string(), method, path, content_type, body)
+}
+
+/// A JSON command to the page as if it were named `host`.
+pub fn http_with_host(addr: SocketAddr, host: &str, body: &[u8]) -> Response {
+    request(
+        addr,
+        host,
+        "POST",
+        "/api/command",
+        Some("application/json"),
+        body,
+    )
+}
+
+fn request(
+    addr: SocketAddr,
+    host: &str,
+    method: &str,
+    path: &str,
+    content_type: Option<&str>,
+    body: &[u8],
+) -> Response {
     let mut stream = TcpStream::connect(addr).unwrap();
     stream
         .set_read_timeout(Some(Duration::from_secs(30)))
         .unwrap();
     let mut head = format!(
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n",
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\nContent-Length: {}\r\n",
         body.len()
     );
     if let Some(content_type) = content_type {
