@@ -1,11 +1,13 @@
 // The 3D twin: the part at its nominal pose (ghost) and aligned pose (solid), the touches coloured
-// by signed residual with their approach lines, and the robot as a line through its joints with
-// the ball at its TCP, moving live. The robot base frame is z-up, in metres.
+// by signed residual with their approach lines, and the robot (its URDF's primitives, or a line
+// through its joints) with the ball at its TCP, moving live. The robot base frame is z-up, in
+// metres.
 import * as THREE from './vendor/three.module.min.js';
 
 const GHOST = new THREE.MeshStandardMaterial({ color: 0x6b7280, transparent: true, opacity: 0.25, depthWrite: false });
 const ALIGNED = new THREE.MeshStandardMaterial({ color: 0x16a34a, transparent: true, opacity: 0.8 });
 const ROBOT = new THREE.MeshStandardMaterial({ color: 0xf97316 });
+const ROBOT_SHAPE = new THREE.MeshStandardMaterial({ color: 0xf97316, roughness: 0.6 });
 const BALL = new THREE.MeshStandardMaterial({ color: 0xfacc15 });
 const UNALIGNED_TOUCH = new THREE.Color(0x9ca3af);
 
@@ -127,7 +129,34 @@ export function createTwin(canvas) {
     redraw();
   }, { passive: false });
 
+  // The robot's own primitives, one group per link, posed by each robot event.
+  const linkGroups = new Map();
+  function addRobotShapes(shapes) {
+    for (const shape of shapes) {
+      let group = linkGroups.get(shape.link);
+      if (!group) {
+        group = new THREE.Group();
+        group.visible = false;
+        linkGroups.set(shape.link, group);
+        robot.add(group);
+      }
+      const [a, b, c] = shape.size_m;
+      let geometry;
+      if (shape.kind === 'box') geometry = new THREE.BoxGeometry(a, b, c);
+      else if (shape.kind === 'sphere') geometry = new THREE.SphereGeometry(a, 20, 14);
+      else if (shape.kind === 'capsule') geometry = new THREE.CapsuleGeometry(a, c, 8, 20);
+      else geometry = new THREE.CylinderGeometry(a, a, c, 24);
+      // URDF cylinders and capsules lie along z, three.js's along y.
+      if (shape.kind === 'cylinder' || shape.kind === 'capsule') geometry.rotateX(Math.PI / 2);
+      const mesh = new THREE.Mesh(geometry, ROBOT_SHAPE);
+      mesh.position.set(...shape.xyz);
+      mesh.quaternion.set(...shape.quaternion);
+      group.add(mesh);
+    }
+  }
+
   function setScene(doc) {
+    addRobotShapes(doc.robot_shapes || []);
     const geometry = new THREE.BufferGeometry();
     geometry.setAttribute('position', new THREE.Float32BufferAttribute(doc.part.vertices.flat(), 3));
     geometry.setIndex(doc.part.triangles.flat());
@@ -173,6 +202,13 @@ export function createTwin(canvas) {
   }
 
   function setRobot(pose) {
+    const shaped = (pose.links || []).filter((link) => linkGroups.has(link.link));
+    for (const link of shaped) {
+      const group = linkGroups.get(link.link);
+      group.visible = true;
+      group.position.set(...link.xyz);
+      group.quaternion.set(...link.quaternion);
+    }
     const points = pose.joints_m.map((p) => new THREE.Vector3(...p));
     while (links.length < points.length) {
       const link = new THREE.Mesh(linkGeometry, ROBOT);
@@ -180,10 +216,11 @@ export function createTwin(canvas) {
       links.push({ link, joint });
       robot.add(link, joint);
     }
+    // Without the robot's own shapes, a line through its joints stands for it.
     points.forEach((point, i) => {
       links[i].joint.position.copy(point);
-      links[i].joint.visible = true;
-      if (i + 1 < points.length) placeLink(links[i].link, point, points[i + 1]);
+      links[i].joint.visible = shaped.length === 0;
+      if (i + 1 < points.length && shaped.length === 0) placeLink(links[i].link, point, points[i + 1]);
       else links[i].link.visible = false;
     });
     const tcp = new THREE.Vector3(...pose.tcp_m);

@@ -6,7 +6,8 @@
 //! - [`state`]: status and inspections polled from the service every 200 ms, published on change;
 //! - [`events`]: server-sent events carrying them (and the live robot) to every open page;
 //! - [`live`]: the bridge's hardware-state stream turned into robot poses for the twin;
-//! - [`scene`]: the session's part mesh, nominal pose and kinematics, loaded when the page starts;
+//! - [`scene`]: the session's part mesh, nominal pose and kinematics, loaded when the page starts,
+//!   and [`robot_shapes`]: the robot's URDF visual primitives posed at each joint sample;
 //! - [`api`], [`assets`]: the JSON endpoints and the embedded page (HTML, JS, CSS, three.js).
 //!
 //! The server runs on a tokio runtime in a thread of its own, beside the service's threads;
@@ -16,6 +17,7 @@ pub mod api;
 pub mod assets;
 pub mod events;
 pub mod live;
+pub mod robot_shapes;
 pub mod scene;
 pub mod service_link;
 pub mod state;

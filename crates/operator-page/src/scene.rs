@@ -13,6 +13,8 @@ use nalgebra::Isometry3;
 use protocol::session::Inspection;
 use serde::Serialize;
 
+use crate::robot_shapes::{LinkPose, RobotShapes, ShapeDocument};
+
 /// The part's mesh in the part frame, m: what `GET /api/scene` sends once.
 #[derive(Debug, Clone, Serialize)]
 pub struct PartMesh {
@@ -31,6 +33,8 @@ pub struct SceneDocument {
     pub nominal_pose: protocol::Pose,
     /// The ball's radius, m.
     pub tip_radius_m: f64,
+    /// The robot's visual primitives, each in its link's frame (empty: draw the joint line).
+    pub robot_shapes: Vec<ShapeDocument>,
 }
 
 /// The robot at one joint sample: a line through its joints to the flange, and the TCP.
@@ -42,6 +46,8 @@ pub struct RobotPose {
     pub tcp_m: [f64; 3],
     /// The tool's axis (TCP z), unit vector.
     pub tool_axis: [f64; 3],
+    /// The pose of each link that has shapes, base frame.
+    pub links: Vec<LinkPose>,
 }
 
 /// The `robot` event.
@@ -69,6 +75,7 @@ pub struct TouchPoint {
 pub struct Scene {
     chain: Chain,
     tool: Tool,
+    robot: Option<RobotShapes>,
     document: SceneDocument,
 }
 
@@ -86,6 +93,12 @@ impl Scene {
                 session.display()
             )));
         };
+        let folder = session.parent().unwrap_or(Path::new("."));
+        let robot = loaded
+            .file
+            .robot
+            .as_ref()
+            .and_then(|section| RobotShapes::load(section, folder, &chain.joint_names()));
         // f32 is plenty for drawing and halves the document.
         #[allow(clippy::cast_possible_truncation)]
         let vertices = loaded
@@ -101,10 +114,15 @@ impl Scene {
             },
             nominal_pose: loaded.file.part.nominal_pose,
             tip_radius_m: loaded.tool.tip_radius_m,
+            robot_shapes: robot
+                .as_ref()
+                .map(|robot| robot.shapes().to_vec())
+                .unwrap_or_default(),
         };
         Ok(Self {
             chain,
             tool: loaded.tool,
+            robot,
             document,
         })
     }
@@ -126,6 +144,11 @@ impl Scene {
                 .collect(),
             tcp_m: triple(&tcp.translation.vector),
             tool_axis: triple(&(tcp.rotation * nalgebra::Vector3::z())),
+            links: self
+                .robot
+                .as_ref()
+                .map(|robot| robot.link_poses(q))
+                .unwrap_or_default(),
         })
     }
 

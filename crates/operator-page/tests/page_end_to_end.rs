@@ -76,6 +76,10 @@ fn the_page_drives_the_service_and_follows_other_clients() {
     assert!(scene["part"]["vertices"].as_array().unwrap().len() >= 8);
     assert!(scene["part"]["triangles"].as_array().unwrap().len() >= 12);
     assert_eq!(scene["base_frame"], "base_link");
+    // The robot's own primitives from its URDF, each in its link's frame.
+    let shapes = scene["robot_shapes"].as_array().unwrap();
+    assert!(shapes.len() >= 6, "{shapes:?}");
+    assert!(shapes.iter().any(|s| s["link"] == "forearm_link"));
 
     let mut events = Events::open(addr);
     events.wait_for("state", Duration::from_secs(10), |state| {
@@ -112,6 +116,8 @@ fn the_page_drives_the_service_and_follows_other_clients() {
     let robot = events.wait_for("robot", Duration::from_secs(10), |_| true);
     assert_eq!(robot["joints_m"].as_array().unwrap().len(), 7, "{robot}");
     assert!(robot["tcp_m"].as_array().unwrap().len() == 3);
+    let links = robot["links"].as_array().unwrap();
+    assert!(links.iter().any(|l| l["link"] == "forearm_link"), "{robot}");
     let status = events.wait_for("status", Duration::from_secs(10), |s| {
         s["connected"] == true
     });
