@@ -180,3 +180,40 @@ impl RobotShapes {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use align_core::robots::ShippedRobot;
+
+    #[test]
+    fn links_are_posed_as_the_chain_has_them() {
+        let robots = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../robots");
+        let section = RobotSection {
+            urdf: "ur10.urdf".to_owned(),
+            base_link: "base_link".to_owned(),
+            tip_link: "tool0".to_owned(),
+            package_dirs: Default::default(),
+            kinematics: None,
+            joint_offsets: None,
+            joint_compliance: None,
+            trigger_latency_s: None,
+        };
+        let chain = ShippedRobot::Ur10.chain().unwrap();
+        let robot = RobotShapes::load(&section, &robots, &chain.joint_names()).unwrap();
+        let q = [0.3, -1.2, 1.4, -1.8, -1.57, 0.2];
+        let tool0 = robot.model.link_id("tool0").unwrap();
+        let ours = robot.base_from_link(tool0, &q).unwrap();
+        let theirs = chain.forward(&q).unwrap();
+        assert!((ours.to_homogeneous() - theirs.to_homogeneous()).norm() < 1e-12);
+        // Every link with a shape is posed, and every shape belongs to one.
+        let posed = robot.link_poses(&q);
+        assert!(posed.len() >= 6);
+        assert!(
+            robot
+                .shapes()
+                .iter()
+                .all(|s| posed.iter().any(|p| p.link == s.link))
+        );
+    }
+}
