@@ -181,3 +181,19 @@ fn iiwa14_matches_hand_derived_chain_over_1000_configurations() {
     }
     assert!(worst.0 <= 1e-9 && worst.1 <= 1e-9, "worst {worst:?}");
 }
+
+#[test]
+fn joint_frames_end_at_the_tip_and_each_is_the_forward_kinematics_of_the_joints_before_it() {
+    // The operator page draws the arm through these frames: the last must be the tip, and the
+    // first joint's frame must not move with any joint.
+    let chain = ShippedRobot::Ur10.chain().expect("chain");
+    let q = [0.3, -1.2, 1.4, -1.8, -1.57, 0.2];
+    let frames = chain.joint_frames_unchecked(&q);
+    assert_eq!(frames.len(), 7);
+    let tip = chain.forward(&q).expect("fk");
+    assert!((frames[6].to_homogeneous() - tip.to_homogeneous()).norm() < 1e-12);
+    let at_zero = chain.joint_frames_unchecked(&[0.0; 6]);
+    assert!((frames[0].to_homogeneous() - at_zero[0].to_homogeneous()).norm() < 1e-12);
+    // The shoulder sits d1 above the base on joint 1's axis, whatever the joints.
+    assert!((frames[1].translation.vector.z - 0.1273).abs() < 1e-9);
+}

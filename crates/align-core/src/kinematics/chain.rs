@@ -213,6 +213,20 @@ impl Chain {
         base_from_current
     }
 
+    /// The frame of each joint just before its motion, then the tip: `dof + 1` poses in the
+    /// base frame, e.g. to draw the arm as a line through its joints. Joints missing from a
+    /// short `q` are left out.
+    pub fn joint_frames_unchecked(&self, q: &[f64]) -> Vec<Isometry3<f64>> {
+        let mut frames = Vec::with_capacity(self.segments.len() + 1);
+        let mut base_from_current = self.base_from_first;
+        for (segment, &value) in self.segments.iter().zip(q) {
+            frames.push(base_from_current);
+            base_from_current = base_from_current * motion(segment, value) * segment.after;
+        }
+        frames.push(base_from_current);
+        frames
+    }
+
     /// Geometric Jacobian in the base frame at the tip origin: rows 0-2 map joint rates to the
     /// tip's linear velocity, rows 3-5 to its angular velocity.
     pub fn jacobian(&self, q: &[f64]) -> Result<Matrix6xX<f64>, KinematicsError> {

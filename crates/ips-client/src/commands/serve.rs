@@ -46,6 +46,12 @@ pub struct ServeArgs {
     /// (worst case half a sample period off). Without it, only `get` captures.
     #[arg(long, value_name = "INPUT")]
     pub trigger: Option<protocol::DigitalInput>,
+    /// Also serve the operator's page at http://ADDR/ (HOST:PORT; `127.0.0.1:8080` keeps it
+    /// on this machine, `127.0.0.1:0` picks a free port). The page is a client of the REP
+    /// socket and is neither authenticated nor encrypted: bind it to loopback or the cell's
+    /// network only. The READY line then adds `http=http://HOST:PORT`.
+    #[arg(long, value_name = "ADDR")]
+    pub http: Option<String>,
 }
 
 /// `--session-inspections`.
@@ -72,29 +78,65 @@ impl ServeArgs {
     }
 }
 
-/// Serves until a signal; prints `READY rep=ENDPOINT` on stdout once requests are answered.
+/// Serves until a signal; prints `READY rep=ENDPOINT` (and ` http=URL` with `--http`) on stdout
+/// once requests are answered.
 pub fn run(args: &ServeArgs) -> Result<String, CliError> {
     init_logs();
     let mut signals = Signals::new([SIGINT, SIGTERM])
         .map_err(|error| CliError::Failure(format!("cannot handle signals: {error}")))?;
-    server::run(
-        &args.config(),
-        |service| {
-            for warning in service.journal_report.warnings() {
-                tracing::warn!("{warning}");
-            }
-            tracing::info!("{}", service.inspections_note);
-            println!("READY rep={}", service.rep_endpoint);
-        },
-        || {
-            signals.forever().next();
-        },
-    )
-    .map_err(|error| match error {
+    let config = args.config();
+    let service = server::start(&config).map_err(|error| match error {
         ServiceError::BadInput(bad) => CliError::BadInput(bad),
         other => CliError::Failure(other.to_string()),
     })?;
+    for warning in service.journal_report.warnings() {
+        tracing::warn!("{warning}");
+    }
+    tracing::info!("{}", service.inspections_note);
+    let page = match &args.http {
+        Some(listen) => match start_page(listen, &config, &service.rep_endpoint) {
+            Ok(page) => Some(page),
+            Err(error) => {
+                service.stop();
+                return Err(error);
+            }
+        },
+        None => None,
+    };
+    match &page {
+        Some(page) => {
+            tracing::info!("operator page at {}/", page.url());
+            println!("READY rep={} http={}", service.rep_endpoint, page.url());
+        }
+        None => println!("READY rep={}", service.rep_endpoint),
+    }
+    signals.forever().next();
+    if let Some(page) = page {
+        page.stop();
+    }
+    service.stop();
     Ok(String::new())
+}
+
+/// The operator's page against the service's bound REP endpoint, in this process.
+fn start_page(
+    listen: &str,
+    config: &server::Config,
+    rep_endpoint: &str,
+) -> Result<operator_page::Handle, CliError> {
+    operator_page::start(&operator_page::Config {
+        listen: listen.to_owned(),
+        service: rep_endpoint.to_owned(),
+        bridge_pub: config.bridge_pub.clone(),
+        session: config.session.clone(),
+        reply_timeout: crate::client::DEFAULT_REPLY_TIMEOUT,
+    })
+    .map_err(|error| match error {
+        operator_page::PageError::Bind { .. } | operator_page::PageError::Session(_) => {
+            CliError::BadInput(align_service::BadInput(error.to_string()))
+        }
+        other => CliError::Failure(other.to_string()),
+    })
 }
 
 /// Logs to stderr at the levels `RUST_LOG` names (default `info`; `RUST_LOG=debug` adds one
