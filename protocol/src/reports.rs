@@ -176,6 +176,10 @@ pub struct DiagnoseReport {
     /// its session is in memory).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plot: Option<String>,
+    /// The same as a page for a browser (verdict, plot, candidates, touches), written next to
+    /// the session file by `ips diagnose SESSION`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub page: Option<String>,
     /// The robot base frame the poses are relative to (the session's `base_link`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub base_frame: Option<String>,

@@ -287,3 +287,33 @@ fn the_residual_plot_fits_its_titles_shows_every_bar_and_says_what_was_applied()
     assert!(plot.contains("No effect applied (verdict ambiguous)"));
     let _ = std::fs::remove_dir_all(folder);
 }
+
+/// `ips diagnose SESSION` also writes the diagnosis as a page: the verdict, the parameters in mm,
+/// the plot inline and one row per candidate that lost and per touch.
+#[test]
+fn the_diagnosis_page_holds_the_verdict_the_plot_the_candidates_and_the_touches() {
+    let path = scratch_session("session_probe_radius.json");
+    let result = diagnose(&path);
+    let page = std::fs::read_to_string(result["page"].as_str().unwrap()).unwrap();
+    assert!(page.starts_with("<!doctype html>"));
+    assert!(page.contains("<strong id=\"verdict\">effect</strong>"));
+    assert!(
+        page.contains("<td>delta_radius_m</td><td class=\"n\">+0.4"),
+        "{page}"
+    );
+    assert!(page.contains("<figure><svg"));
+    let rows = |table: &str| {
+        let start = page.find(&format!("<table id=\"{table}\">")).unwrap();
+        let end = start + page[start..].find("</table>").unwrap();
+        page[start..end].matches("<tr><td>").count()
+    };
+    assert_eq!(
+        rows("alternatives"),
+        result["alternatives"].as_array().unwrap().len()
+    );
+    assert_eq!(rows("touches"), 27);
+    // No script, and nothing fetched: the only address is the SVG namespace.
+    assert!(!page.contains("<script"));
+    assert_eq!(page.matches("http").count(), 1, "{page}");
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}

@@ -109,6 +109,7 @@ impl SessionDiagnosis {
             explanation: diagnosis.explanation.clone(),
             chi_square: [diagnosis.chi_square.0, diagnosis.chi_square.1],
             plot,
+            page: None,
             base_frame: Some(self.base_frame.clone()),
         }
     }

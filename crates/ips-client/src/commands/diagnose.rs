@@ -89,10 +89,24 @@ pub fn run_file(path: &Path) -> Result<DiagnoseReport, CliError> {
         &diagnosed.samples,
         diagnosed.noise_sigma_m,
     );
-    std::fs::write(&plot, picture).map_err(|error| {
-        CliError::Failure(format!("cannot write '{}': {error}", plot.display()))
-    })?;
-    Ok(diagnosed.report(Some(plot.display().to_string())))
+    let write = |target: &Path, text: &str| {
+        std::fs::write(target, text).map_err(|error| {
+            CliError::Failure(format!("cannot write '{}': {error}", target.display()))
+        })
+    };
+    write(&plot, &picture)?;
+    let mut report = diagnosed.report(Some(plot.display().to_string()));
+    let page_path = path.with_extension("diagnosis.html");
+    let name = path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    write(
+        &page_path,
+        &crate::report_html::diagnosis_page(&name, &report, &picture),
+    )?;
+    report.page = Some(page_path.display().to_string());
+    Ok(report)
 }
 
 /// `--apply OUT`: diagnoses SESSION, writes it to OUT with the effect in its model.
@@ -212,7 +226,13 @@ fn svg(diagnosis: &Diagnosis, samples: &[TouchSample], sigma: f64) -> String {
          <text x=\"10\" y=\"34\">{}</text>\n\
          <rect x=\"{margin}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#e8f0e8\"/>\n\
          <line x1=\"{margin}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\"/>\n",
-        height + SCATTER_HEIGHT,
+        // The scatter panel only when an effect was applied; otherwise one line says why not.
+        height
+            + if applied.is_some() {
+                SCATTER_HEIGHT
+            } else {
+                50.0
+            },
         titles[0],
         titles[1],
         y(2.0 * sigma),
@@ -377,6 +397,9 @@ pub fn to_text(report: &DiagnoseReport) -> String {
     }
     if let Some(plot) = &report.plot {
         text += &format!("plot: {plot}\n");
+    }
+    if let Some(page) = &report.page {
+        text += &format!("report: {page}\n");
     }
     text
 }
