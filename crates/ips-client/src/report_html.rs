@@ -5,23 +5,9 @@
 
 use std::fmt::Write as _;
 
+use align_core::io::export::xml_escaped as escaped;
 use align_service::jobs::units::person_unit;
 use protocol::reports::DiagnoseReport;
-
-/// Text made safe to put in HTML.
-fn escaped(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            _ => out.push(c),
-        }
-    }
-    out
-}
 
 fn mm(value_m: f64) -> String {
     format!("{:.4}", value_m * 1e3 + 0.0)

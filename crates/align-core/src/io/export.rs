@@ -135,7 +135,8 @@ fn joined(values: &[f64]) -> String {
         .join(" ")
 }
 
-fn xml_escaped(text: &str) -> String {
+/// `text` safe inside XML or HTML text and attribute values.
+pub fn xml_escaped(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {
         match c {
