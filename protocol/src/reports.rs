@@ -183,6 +183,10 @@ pub struct DiagnoseReport {
     /// The robot base frame the poses are relative to (the session's `base_link`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub base_frame: Option<String>,
+    /// The touch noise the diagnosis tested against (the session's `noise_sigma`), m: the
+    /// pictures draw its +-2 sigma band.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_sigma_m: Option<f64>,
 }
 
 /// A fitted effect: its parameters and their standard errors, by parameter name (units in the

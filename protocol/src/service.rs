@@ -38,11 +38,14 @@ pub enum ServiceCommand {
     Save(PathRequest),
     /// Replace the inspections with those of the session file at `path`.
     Load(PathRequest),
+    /// The latest alignment and diagnosis this service computed (whoever asked for them) and
+    /// the latest next-touch suggestion.
+    Results,
 }
 
 impl ServiceCommand {
     /// Every command's name, as the `command` field spells it.
-    pub const NAMES: [&'static str; 12] = [
+    pub const NAMES: [&'static str; 13] = [
         "status",
         "start",
         "stop",
@@ -55,6 +58,7 @@ impl ServiceCommand {
         "diagnose",
         "save",
         "load",
+        "results",
     ];
 
     pub fn name(&self) -> &'static str {
@@ -71,6 +75,7 @@ impl ServiceCommand {
             ServiceCommand::Diagnose => "diagnose",
             ServiceCommand::Save(_) => "save",
             ServiceCommand::Load(_) => "load",
+            ServiceCommand::Results => "results",
         }
     }
 }
@@ -311,6 +316,10 @@ pub struct StatusReply {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<String>,
     pub mirroring: bool,
+    /// Counts the alignments and diagnoses the service computed: a client that shows results
+    /// asks for `results` when it changes.
+    #[serde(default)]
+    pub results_serial: u64,
     /// Age of the latest joint state, s; null before the first.
     pub sample_age_s: Option<f64>,
     /// True when there is no joint state or it is older than the service's limit.
@@ -384,4 +393,32 @@ pub struct SavedReply {
     /// computed from exactly these inspections.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub results: Vec<String>,
+}
+
+/// `results`: the latest alignment and diagnosis the service computed, whoever asked for them,
+/// and the next touch the latest `get` suggested.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResultsReply {
+    /// `status`'s `results_serial` when these were read.
+    pub serial: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alignment: Option<LatestResult<crate::reports::AlignReport>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diagnosis: Option<LatestResult<crate::reports::DiagnoseReport>>,
+    /// Cleared when inspections are removed, reset or loaded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub next_touch: Option<NextTouchHint>,
+}
+
+/// A result and whether it still describes the inspections the service holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LatestResult<T> {
+    /// The inspections it was computed from.
+    pub inspections: Vec<String>,
+    /// True while those are exactly the service's inspections (none removed, none added).
+    pub current: bool,
+    /// `results_serial` when it was computed (0: read from the session file): the larger of
+    /// two results' is the newer.
+    pub serial: u64,
+    pub report: T,
 }

@@ -294,3 +294,43 @@ fn the_session_files_inspections_are_kept_or_dropped_and_the_start_says_which() 
     kept.stop();
     let _ = std::fs::remove_dir_all(&folder);
 }
+
+/// `results` gives the latest alignment and diagnosis whoever asked for them, says whether they
+/// still describe the inspections held, and `status` counts them so a client knows when to ask.
+#[test]
+fn results_hold_the_latest_alignment_and_diagnosis_and_say_when_they_are_stale() {
+    let fixture = Fixture::start("results");
+    let empty = fixture.call(json!({"command": "results"}));
+    assert_eq!(empty["ok"], true, "{empty}");
+    assert_eq!(empty["data"], json!({"serial": 0}));
+    let aligned = fixture.call(json!({"command": "align"}));
+    assert_eq!(aligned["ok"], true, "{aligned}");
+    let status = fixture.call(json!({"command": "status"}));
+    assert_eq!(status["data"]["results_serial"], 1);
+    let results = fixture.call(json!({"command": "results"}))["data"].clone();
+    assert_eq!(results["serial"], 1);
+    assert_eq!(results["alignment"]["current"], true);
+    assert_eq!(results["alignment"]["report"], aligned["data"]);
+    assert_eq!(
+        results["alignment"]["inspections"]
+            .as_array()
+            .unwrap()
+            .len(),
+        9
+    );
+    assert!(results.get("diagnosis").is_none(), "{results}");
+    let diagnosed = fixture.call(json!({"command": "diagnose"}));
+    assert_eq!(diagnosed["ok"], true, "{diagnosed}");
+    assert!(diagnosed["data"]["noise_sigma_m"].as_f64().unwrap() > 0.0);
+    let first = results["alignment"]["inspections"][0].clone();
+    let removed = fixture.call(json!({"command": "remove", "ids": [first]}));
+    assert_eq!(removed["ok"], true, "{removed}");
+    let results = fixture.call(json!({"command": "results"}))["data"].clone();
+    assert_eq!(results["serial"], 2);
+    assert_eq!(results["alignment"]["current"], false);
+    assert_eq!(results["diagnosis"]["current"], false);
+    assert_eq!(results["diagnosis"]["report"], diagnosed["data"]);
+    assert_eq!(results["alignment"]["serial"], 1);
+    assert_eq!(results["diagnosis"]["serial"], 2);
+    fixture.finish();
+}

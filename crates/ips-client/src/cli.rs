@@ -87,6 +87,9 @@ pub enum Command {
     Load(commands::service::PathArgs),
     /// The service's state: mirroring, inspections, age of the latest joint state.
     Status(commands::service::ServiceArgs),
+    /// The latest alignment and diagnosis the service computed (whoever asked for them), and
+    /// whether they still describe its inspections; the latest next-touch suggestion.
+    Results(commands::service::ServiceArgs),
     /// The whole loop on the simulator: sim-robot, robot-bridge and the service as child
     /// processes, nine touches at a hidden part pose, alignment, error against the truth.
     Demo(commands::demo::DemoArgs),

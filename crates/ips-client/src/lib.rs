@@ -7,7 +7,6 @@ pub mod cli;
 pub mod client;
 pub mod commands;
 pub mod export;
-pub mod report_html;
 
 pub use align_service::BadInput;
 

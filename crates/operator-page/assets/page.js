@@ -12,7 +12,6 @@ const page = {
   status: null,
   state: null,
   selected: new Set(),
-  nextTouch: null,
   lastError: null,
   busy: false,
 };
@@ -55,9 +54,7 @@ async function press(command) {
   try {
     const data = await send(command, ids);
     page.lastError = null;
-    if (command === 'get') page.nextTouch = data.next_touch || null;
-    if (command === 'remove') page.selected.clear();
-    if (command === 'reset') { page.selected.clear(); page.nextTouch = null; }
+    if (command === 'remove' || command === 'reset') page.selected.clear();
     if (command === 'get' && data.note) page.lastError = 'Touch ' + data.id + ': ' + data.note;
   } catch (error) {
     page.lastError = command + ': ' + error.message;
@@ -107,8 +104,8 @@ function guidance() {
   if (!status.mirroring) return 'Start mirroring: press Start.';
   if (status.stale) return 'Mirroring, but no fresh joint state: is the robot connected to the bridge?';
   const lines = [];
-  if (page.nextTouch) {
-    const next = page.nextTouch;
+  const next = page.state && page.state.results ? page.state.results.next_touch : null;
+  if (next) {
     lines.push('Take a touch: next suggested at ' + vec(next.point_mm) + ' mm, approach ' +
       vec(next.approach, 2) + ', tilt ' + next.tilt_deg.toFixed(0) + '°: ' + next.reason);
   } else {
@@ -159,27 +156,59 @@ function describeResult(result) {
   return lines.join('\n');
 }
 
+// The newer (by the service's serial) of its latest alignment and diagnosis, whoever asked.
+function latestResult(state) {
+  const results = (state && state.results) || {};
+  const found = [];
+  if (results.alignment) found.push({ command: 'align', ...results.alignment });
+  if (results.diagnosis) found.push({ command: 'diagnose', ...results.diagnosis });
+  found.sort((a, b) => b.serial - a.serial);
+  return found[0] || null;
+}
+
 function renderResult() {
   const box = $('result');
-  const state = page.state;
-  if (!state || !state.result) {
+  const result = latestResult(page.state);
+  if (!result) {
     box.textContent = 'No alignment yet: take touches, then press Align.';
     box.classList.remove('stale');
-    return;
+  } else {
+    box.textContent = describeResult(result) +
+      (result.current ? '' : '\n(the inspections changed since: press ' + (result.command === 'align' ? 'Align' : 'Diagnose') + ' again)');
+    box.classList.toggle('stale', !result.current);
   }
-  box.textContent = describeResult(state.result) +
-    (state.result_current ? '' : '\n(the inspections changed since: press Align again)');
-  box.classList.toggle('stale', !state.result_current);
+  renderDiagnosis();
+}
+
+// The service's latest diagnosis as the page server drew it (the same charts and tables as the
+// report `ips diagnose` writes; every text in it escaped there).
+let shownDiagnosis = null;
+function renderDiagnosis() {
+  const panel = $('diagnosis-panel');
+  const state = page.state;
+  const diagnosis = state && state.results ? state.results.diagnosis : null;
+  panel.hidden = !diagnosis || !state.diagnosis_html;
+  if (panel.hidden) { shownDiagnosis = null; return; }
+  const report = diagnosis.report;
+  $('diagnosis-summary').textContent = report.verdict + (report.effect && report.verdict === 'effect' ? ' (' + report.effect.name + ')' : '') +
+    ', rms ' + mm(report.before.rms) + ' → ' + mm(report.after.rms) + ' mm' + (diagnosis.current ? '' : ' (inspections changed since)');
+  panel.classList.toggle('stale', !diagnosis.current);
+  if (shownDiagnosis !== state.diagnosis_html) {
+    $('diagnosis').innerHTML = state.diagnosis_html;
+    // A new diagnosis opens itself; the operator may close it.
+    if (shownDiagnosis !== null || latestResult(state).command === 'diagnose') panel.open = true;
+    shownDiagnosis = state.diagnosis_html;
+  }
 }
 
 function residuals(state) {
   const byId = new Map();
-  if (!state.result || !state.result_current) return byId;
-  const report = state.result.report;
-  if (state.result.command === 'align') {
-    for (const r of report.residuals || []) byId.set(r.id, r.distance);
+  const result = latestResult(state);
+  if (!result || !result.current) return byId;
+  if (result.command === 'align') {
+    for (const r of result.report.residuals || []) byId.set(r.id, r.distance);
   } else {
-    for (const r of report.inspections || []) byId.set(r.id, r.residual_after);
+    for (const r of result.report.inspections || []) byId.set(r.id, r.residual_after);
   }
   return byId;
 }
@@ -237,7 +266,7 @@ function connect() {
     renderInspections();
     renderResult();
     renderMessages();
-    if (twin) twin.setState(state, residuals(state));
+    if (twin) twin.setState(state, residuals(state), latestResult(state));
   });
   events.addEventListener('robot', (event) => {
     const robot = JSON.parse(event.data);

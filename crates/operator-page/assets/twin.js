@@ -1,5 +1,5 @@
 // The 3D twin: the part at its nominal pose (ghost) and aligned pose (solid), the touches coloured
-// by signed residual with their approach lines, and the robot (its URDF's primitives, or a line
+// by signed residual with their approach lines, the next suggested touch with its approach, and the robot (its URDF's primitives, or a line
 // through its joints) with the ball at its TCP, moving live. The robot base frame is z-up, in
 // metres.
 import * as THREE from './vendor/three.module.min.js';
@@ -10,6 +10,8 @@ const ROBOT = new THREE.MeshStandardMaterial({ color: 0xf97316 });
 const ROBOT_SHAPE = new THREE.MeshStandardMaterial({ color: 0xf97316, roughness: 0.6 });
 const BALL = new THREE.MeshStandardMaterial({ color: 0xfacc15 });
 const UNALIGNED_TOUCH = new THREE.Color(0x9ca3af);
+// Drawn through everything: the place to touch next is often on a face the view does not show.
+const NEXT_TOUCH = new THREE.MeshStandardMaterial({ color: 0x7c3aed, emissive: 0x3b0764, depthTest: false, transparent: true });
 
 // URDF's rpy: R = Rz(yaw) Ry(pitch) Rx(roll), three.js's Euler order 'ZYX'.
 function poseMatrix(pose) {
@@ -178,7 +180,7 @@ export function createTwin(canvas) {
     redraw();
   }
 
-  function setState(state, residuals) {
+  function setState(state, residuals, result) {
     touches.clear();
     const values = [...residuals.values()].map(Math.abs);
     const scale = Math.max(1e-4, ...values);
@@ -192,9 +194,24 @@ export function createTwin(canvas) {
       const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints([start, centre]), new THREE.LineBasicMaterial({ color: 0x1f2937 }));
       touches.add(marker, line);
     }
+    const next = state.results ? state.results.next_touch : null;
+    if (next) {
+      const point = new THREE.Vector3(...next.point_mm).multiplyScalar(0.001);
+      const approach = new THREE.Vector3(...next.approach).normalize();
+      // Larger than a touch, and its arrow longer than their approach lines: it is the one to find.
+      const target = new THREE.Mesh(new THREE.SphereGeometry(Math.max(2 * tipRadius, 0.012), 20, 14), NEXT_TOUCH);
+      target.position.copy(point);
+      const length = 0.15;
+      const arrow = new THREE.ArrowHelper(approach, point.clone().addScaledVector(approach, -length), length, 0x7c3aed, 0.04, 0.02);
+      for (const material of [arrow.line.material, arrow.cone.material]) {
+        material.depthTest = false;
+        material.transparent = true;
+      }
+      target.renderOrder = arrow.renderOrder = arrow.line.renderOrder = arrow.cone.renderOrder = 10;
+      touches.add(target, arrow);
+    }
     if (aligned) {
-      const result = state.result;
-      const pose = result && state.result_current ? (result.command === 'align' ? result.report.pose : result.report.pose_after) : null;
+      const pose = result && result.current ? (result.command === 'align' ? result.report.pose : result.report.pose_after) : null;
       aligned.visible = Boolean(pose);
       if (pose) aligned.matrix.copy(poseMatrix(pose));
     }

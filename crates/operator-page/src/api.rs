@@ -14,7 +14,7 @@ use serde::Deserialize;
 use serde_json::{Value, json};
 
 use crate::service_link::LinkError;
-use crate::state::{LastResult, Shared};
+use crate::state::Shared;
 
 /// The largest command body accepted: a remove of a few hundred ids.
 pub const MAX_COMMAND_BYTES: usize = 16 * 1024;
@@ -94,34 +94,17 @@ pub async fn command(State(shared): State<Arc<Shared>>, body: Bytes) -> Response
         Ok(data) => data,
         Err(error) => return refusal(StatusCode::BAD_GATEWAY, error.to_string()),
     };
-    if name == "align" || name == "diagnose" {
-        remember_result(&shared, name, &data).await;
-    }
     Json(json!({"ok": true, "command": name, "data": data})).into_response()
 }
 
-/// Keeps the report with the inspections it was computed from (asked right after it: the
-/// service answers in turn, so only a change between the two requests could make them differ,
-/// and then the page shows the result as not current).
-async fn remember_result(shared: &Shared, name: &str, data: &Value) {
-    let Ok(state) = shared.fetch_state().await else {
-        return;
-    };
-    shared.set_last_result(LastResult {
-        command: name.to_owned(),
-        inspections: state.inspections.iter().map(|i| i.id.clone()).collect(),
-        report: data.clone(),
-    });
-    shared.changed.notify_one();
-}
-
-/// `GET /api/state`: status, inspections, touches and the last result, asked of the service now.
+/// `GET /api/state`: status, inspections, touches and the service's latest results, asked of it
+/// now.
 pub async fn state(State(shared): State<Arc<Shared>>) -> Response {
     let status = match shared.fetch_status().await {
         Ok(status) => status,
         Err(reason) => return refusal(StatusCode::BAD_GATEWAY, reason),
     };
-    match shared.fetch_state().await {
+    match shared.fetch_state(status.results_serial).await {
         Ok(state) => Json(json!({"status": status, "state": state})).into_response(),
         Err(reason) => refusal(StatusCode::BAD_GATEWAY, reason),
     }

@@ -1,5 +1,5 @@
 //! `GET /api/events`: server-sent events, so the page follows the service without reloads.
-//! Events: `state` (the inspections, touches and last result; sent first and on every change, so
+//! Events: `state` (the inspections, touches and the service's latest results; sent first and on every change, so
 //! another client's `ips get` shows up), `status` (mirroring, sample age, connection; every poll)
 //! and `robot` (the live joint positions and TCP, at most every 40 ms).
 

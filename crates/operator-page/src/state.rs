@@ -1,13 +1,14 @@
-//! The page's view of the service, always fetched from it: status and inspections by `status`
-//! and `list` requests (the service is the one source of truth; nothing here keeps inspections
-//! between polls), and the last alignment or diagnosis the page asked for. A poller asks every
-//! [`POLL_PERIOD`] and publishes what changed for the event stream.
+//! The page's view of the service, always fetched from it: status, inspections and the latest
+//! results by `status`, `list` and `results` requests (the service is the one source of truth;
+//! nothing here keeps inspections or results of its own, so an alignment another client asked
+//! for shows as well). A poller asks every [`POLL_PERIOD`] and publishes what changed for the
+//! event stream.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use protocol::session::Inspection;
-use protocol::{InspectionsReply, ServiceCommand, StatusReply};
+use protocol::{InspectionsReply, ResultsReply, ServiceCommand, StatusReply};
 use serde::Serialize;
 use tokio::sync::{Notify, watch};
 
@@ -17,25 +18,19 @@ use crate::service_link::ServiceLink;
 /// How often the page's server asks the service for its status and inspections.
 pub const POLL_PERIOD: Duration = Duration::from_millis(200);
 
-/// The last `align` or `diagnose` report the page received, with the inspections it used (it
-/// describes the list only while that is unchanged).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct LastResult {
-    /// `align` or `diagnose`.
-    pub command: String,
-    pub inspections: Vec<String>,
-    pub report: serde_json::Value,
-}
-
 /// `GET /api/state` and the `state` event: the session as the service holds it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StateDocument {
     pub inspections: Vec<Inspection>,
     /// Where each inspection's ball is, for the twin.
     pub touches: Vec<TouchPoint>,
-    pub result: Option<LastResult>,
-    /// True when `result` was computed from exactly `inspections`.
-    pub result_current: bool,
+    /// The service's latest alignment and diagnosis (each with `current` and `serial`) and its
+    /// next-touch suggestion.
+    pub results: ResultsReply,
+    /// The latest diagnosis drawn ([`align_service::report_pages::diagnosis_section`]): HTML
+    /// made here from the report, every text in it escaped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub diagnosis_html: Option<String>,
 }
 
 /// The `status` event: the service's status, or why there is none.
@@ -49,12 +44,23 @@ pub struct StatusDocument {
     pub error: Option<String>,
 }
 
+/// The results as last asked, and what they were asked at: asked again only when the service's
+/// `results_serial` or the inspection list changed (`current` and the suggestion follow the
+/// list).
+#[derive(Debug, Clone)]
+struct ResultsCache {
+    serial: u64,
+    ids: Vec<String>,
+    results: ResultsReply,
+    diagnosis_html: Option<String>,
+}
+
 /// What the HTTP handlers share.
 #[derive(Debug)]
 pub struct Shared {
     pub link: ServiceLink,
     pub scene: Scene,
-    pub last_result: Mutex<Option<LastResult>>,
+    results: Mutex<Option<ResultsCache>>,
     /// Wakes the poller at once after a command, so the page sees its effect without waiting.
     pub changed: Notify,
     pub state: watch::Sender<Option<StateDocument>>,
@@ -68,7 +74,7 @@ impl Shared {
         Self {
             link,
             scene,
-            last_result: Mutex::new(None),
+            results: Mutex::new(None),
             changed: Notify::new(),
             state: watch::Sender::new(None),
             status: watch::Sender::new(StatusDocument {
@@ -78,20 +84,6 @@ impl Shared {
             }),
             robot: watch::Sender::new(None),
         }
-    }
-
-    pub fn last_result(&self) -> Option<LastResult> {
-        self.last_result
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner())
-            .clone()
-    }
-
-    pub fn set_last_result(&self, result: LastResult) {
-        *self
-            .last_result
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(result);
     }
 
     /// Asks the service for its status.
@@ -104,20 +96,59 @@ impl Shared {
         body.into_data("status").map_err(|e| e.to_string())
     }
 
-    /// Asks the service for its inspections and builds the state document around them.
-    pub async fn fetch_state(&self) -> Result<StateDocument, String> {
+    /// The service's results for `serial` (its `status`) and inspections `ids`: the cached ones
+    /// when neither changed since they were asked.
+    async fn fetch_results(
+        &self,
+        serial: u64,
+        ids: &[String],
+    ) -> Result<(ResultsReply, Option<String>), String> {
+        let cached = self
+            .results
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+            .clone()
+            .filter(|cache| cache.serial == serial && cache.ids == ids);
+        if let Some(cache) = cached {
+            return Ok((cache.results, cache.diagnosis_html));
+        }
+        let body = self
+            .link
+            .call(ServiceCommand::Results)
+            .await
+            .map_err(|e| e.to_string())?;
+        let results: ResultsReply = body.into_data("results").map_err(|e| e.to_string())?;
+        let diagnosis_html = results
+            .diagnosis
+            .as_ref()
+            .map(|d| align_service::report_pages::diagnosis_section(&d.report));
+        *self
+            .results
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(ResultsCache {
+            serial: results.serial,
+            ids: ids.to_vec(),
+            results: results.clone(),
+            diagnosis_html: diagnosis_html.clone(),
+        });
+        Ok((results, diagnosis_html))
+    }
+
+    /// Asks the service for its inspections (and its results when `results_serial`, from the
+    /// status just asked, or the list changed) and builds the state document around them.
+    pub async fn fetch_state(&self, results_serial: u64) -> Result<StateDocument, String> {
         let body = self
             .link
             .call(ServiceCommand::List)
             .await
             .map_err(|e| e.to_string())?;
         let list: InspectionsReply = body.into_data("list").map_err(|e| e.to_string())?;
-        let result = self.last_result();
         let ids: Vec<String> = list.inspections.iter().map(|i| i.id.clone()).collect();
+        let (results, diagnosis_html) = self.fetch_results(results_serial, &ids).await?;
         Ok(StateDocument {
             touches: self.scene.touches(&list.inspections),
-            result_current: result.as_ref().is_some_and(|r| r.inspections == ids),
-            result,
+            results,
+            diagnosis_html,
             inspections: list.inspections,
         })
     }
@@ -149,12 +180,12 @@ pub async fn poll(shared: Arc<Shared>) {
                 error: Some(error),
             },
         };
-        let connected = status.connected;
+        let serial = status.status.as_ref().map(|s| s.results_serial);
         shared.status.send_replace(status);
-        if !connected {
+        let Some(serial) = serial else {
             continue;
-        }
-        if let Ok(state) = shared.fetch_state().await {
+        };
+        if let Ok(state) = shared.fetch_state(serial).await {
             shared.state.send_if_modified(|current| {
                 let changed = current.as_ref() != Some(&state);
                 if changed {

@@ -112,6 +112,11 @@ fn the_page_drives_the_service_and_follows_other_clients() {
         ids(&state["inspections"]).contains(&second)
     });
     assert_eq!(seen["touches"].as_array().unwrap().len(), 2, "{seen}");
+    // The service's suggestion after that get, whoever asked for it.
+    assert!(
+        seen["results"]["next_touch"]["point_mm"].is_array(),
+        "{seen}"
+    );
     // The live robot streams too: the TCP at the held pose.
     let robot = events.wait_for("robot", Duration::from_secs(10), |_| true);
     assert_eq!(robot["joints_m"].as_array().unwrap().len(), 7, "{robot}");
@@ -129,24 +134,44 @@ fn the_page_drives_the_service_and_follows_other_clients() {
         let got = command(addr, json!({"command": "get"}));
         assert_eq!(got.status, 200, "{}", got.body);
     }
+    // Another client's align shows on the page: the service keeps its latest results.
+    let other_aligned = call(&other_client, json!({"command": "align"}));
+    assert_eq!(other_aligned["ok"], true, "{other_aligned}");
+    let with_result = events.wait_for("state", Duration::from_secs(10), |s| {
+        s["results"]["alignment"]["current"] == true
+    });
+    assert_eq!(
+        with_result["results"]["alignment"]["report"],
+        other_aligned["data"]
+    );
+    let first_serial = with_result["results"]["alignment"]["serial"]
+        .as_u64()
+        .unwrap();
     let aligned = command(addr, json!({"command": "align"}));
     assert_eq!(aligned.status, 200, "{}", aligned.body);
     let rms = aligned.json()["data"]["rms"].as_f64().unwrap();
     assert!(rms.is_finite() && rms < 1e-4, "rms {rms} m");
     let state = get(addr, "/api/state").json();
-    assert_eq!(state["state"]["result"]["command"], "align");
-    assert_eq!(state["state"]["result_current"], true);
-    let with_result = events.wait_for("state", Duration::from_secs(10), |s| {
-        s["result"]["command"] == "align"
-    });
-    assert_eq!(with_result["result"]["report"]["rms"].as_f64(), Some(rms));
+    let alignment = &state["state"]["results"]["alignment"];
+    assert_eq!(alignment["current"], true);
+    assert_eq!(alignment["report"]["rms"].as_f64(), Some(rms));
+    assert!(alignment["serial"].as_u64().unwrap() > first_serial);
 
     // Diagnose through the page: the DESIGN 6.4 document, and it becomes the result shown.
     let diagnosed = command(addr, json!({"command": "diagnose"}));
     assert_eq!(diagnosed.status, 200, "{}", diagnosed.body);
     assert!(diagnosed.json()["data"]["verdict"].is_string());
     let state = get(addr, "/api/state").json();
-    assert_eq!(state["state"]["result"]["command"], "diagnose");
+    let results = &state["state"]["results"];
+    assert!(
+        results["diagnosis"]["serial"].as_u64() > results["alignment"]["serial"].as_u64(),
+        "{results}"
+    );
+    // Drawn by the page server from the report: verdict, the residual plot, the candidates.
+    let drawn = state["state"]["diagnosis_html"].as_str().unwrap();
+    assert!(drawn.contains("<strong id=\"verdict\">"), "{drawn}");
+    assert!(drawn.contains("<svg"));
+    assert!(drawn.contains("<table id=\"alternatives\">"));
 
     // Remove through the page, and the service agrees.
     let removed = command(addr, json!({"command": "remove", "ids": [first]}));
@@ -154,7 +179,8 @@ fn the_page_drives_the_service_and_follows_other_clients() {
     let listed = call(&other_client, json!({"command": "list"}));
     assert!(!ids(&listed["data"]["inspections"]).contains(&first));
     let stale = get(addr, "/api/state").json();
-    assert_eq!(stale["state"]["result_current"], false);
+    assert_eq!(stale["state"]["results"]["alignment"]["current"], false);
+    assert_eq!(stale["state"]["results"]["diagnosis"]["current"], false);
 
     let stopped = command(addr, json!({"command": "stop"}));
     assert_eq!(stopped.status, 200, "{}", stopped.body);

@@ -111,6 +111,7 @@ impl SessionDiagnosis {
             plot,
             page: None,
             base_frame: Some(self.base_frame.clone()),
+            noise_sigma_m: Some(self.noise_sigma_m),
         }
     }
 }

@@ -13,8 +13,8 @@ use protocol::reports::{AlignReport, CloudReport, DiagnoseReport};
 use protocol::session::{Inspection, SavedResult, SessionFile, SessionResults};
 use protocol::{
     AlignCloudRequest, Command, GetReply, InspectionCountReply, InspectionsReply, JournalEntry,
-    MirroringReply, NextTouchHint, ProtocolError, RobotSide, SavedReply, ServiceCommand,
-    ServiceReply, StatusReply,
+    LatestResult, MirroringReply, NextTouchHint, ProtocolError, ResultsReply, RobotSide,
+    SavedReply, ServiceCommand, ServiceReply, StatusReply,
 };
 use reply_socket::{ReplySocket, Wait};
 use serde::Serialize;
@@ -81,6 +81,13 @@ pub(crate) struct Service {
     /// The last alignment and diagnosis, each with the inspections it used: `save` keeps those
     /// that still describe the inspections.
     pub results: SessionResults,
+    /// Counts the alignments and diagnoses computed (`status`'s `results_serial`).
+    pub results_serial: u64,
+    /// `results_serial` when the alignment and the diagnosis in `results` were computed.
+    pub alignment_serial: u64,
+    pub diagnosis_serial: u64,
+    /// The suggestion the latest `get` made, until the inspections change otherwise.
+    pub latest_next_touch: Option<NextTouchHint>,
     /// Places on the nominal part a next touch may go, drawn at the first `get`.
     pub touch_candidates: std::sync::OnceLock<Vec<guidance::Candidate>>,
 }
@@ -192,6 +199,7 @@ impl Service {
             ServiceCommand::Diagnose => reply(self.diagnose()),
             ServiceCommand::Save(save) => reply(self.save(save.path)),
             ServiceCommand::Load(load) => reply(self.load(load.path)),
+            ServiceCommand::Results => reply(Ok(self.latest_results())),
         }
     }
 
@@ -238,6 +246,7 @@ impl Service {
             inspections: self.inspections.len(),
             kinematics: self.kinematics_note.clone(),
             mirroring: self.mirroring,
+            results_serial: self.results_serial,
             sample_age_s: age,
             stale: age.is_none_or(|a| a > self.config.max_sample_age_s),
         }
@@ -366,7 +375,35 @@ impl Service {
         })?;
         self.next_id += 1;
         self.inspections.push(inspection.clone());
-        Ok(self.where_the_ball_is(inspection))
+        let reply = self.where_the_ball_is(inspection);
+        self.latest_next_touch = reply.next_touch.clone();
+        Ok(reply)
+    }
+
+    /// `results`: the latest alignment and diagnosis, each saying whether it still describes
+    /// the inspections held, and the latest suggestion.
+    fn latest_results(&self) -> ResultsReply {
+        fn latest<T: Clone>(
+            saved: &SavedResult<T>,
+            ids: &[String],
+            serial: u64,
+        ) -> LatestResult<T> {
+            LatestResult {
+                current: saved.inspections == ids,
+                serial,
+                inspections: saved.inspections.clone(),
+                report: saved.report.clone(),
+            }
+        }
+        let ids = self.inspection_ids();
+        ResultsReply {
+            serial: self.results_serial,
+            alignment: (self.results.alignment.as_ref())
+                .map(|s| latest(s, &ids, self.alignment_serial)),
+            diagnosis: (self.results.diagnosis.as_ref())
+                .map(|s| latest(s, &ids, self.diagnosis_serial)),
+            next_touch: self.latest_next_touch.clone(),
+        }
     }
 
     /// The reply to `get`: the inspection, its ball centre, and how far that is from the part's
@@ -496,6 +533,7 @@ impl Service {
         }
         self.journal(&JournalEntry::Remove { ids: ids.clone() })?;
         self.inspections.retain(|i| !ids.contains(&i.id));
+        self.latest_next_touch = None;
         Ok(InspectionCountReply {
             inspections: self.inspections.len(),
         })
@@ -504,6 +542,7 @@ impl Service {
     fn reset(&mut self) -> Handled<InspectionCountReply> {
         self.journal(&JournalEntry::Reset)?;
         self.inspections.clear();
+        self.latest_next_touch = None;
         Ok(InspectionCountReply { inspections: 0 })
     }
 
@@ -524,6 +563,8 @@ impl Service {
             inspections: self.inspection_ids(),
             report: report.clone(),
         });
+        self.results_serial += 1;
+        self.alignment_serial = self.results_serial;
         Ok(report)
     }
 
@@ -545,6 +586,8 @@ impl Service {
             inspections: self.inspection_ids(),
             report: report.clone(),
         });
+        self.results_serial += 1;
+        self.diagnosis_serial = self.results_serial;
         Ok(report)
     }
 
@@ -604,6 +647,7 @@ impl Service {
         })?;
         self.next_id = highest_id(&file.inspections) + 1;
         self.inspections = file.inspections;
+        self.latest_next_touch = None;
         Ok(InspectionCountReply {
             inspections: self.inspections.len(),
         })

@@ -280,6 +280,10 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
     }
     let mut service = handlers::Service {
         results: template.results.clone().unwrap_or_default(),
+        results_serial: 0,
+        alignment_serial: 0,
+        diagnosis_serial: 0,
+        latest_next_touch: None,
         touch_candidates: std::sync::OnceLock::new(),
         template,
         folder,

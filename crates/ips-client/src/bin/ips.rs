@@ -47,6 +47,7 @@ fn run(command: Command) -> Result<String, CliError> {
         Command::Save(args) => service::save(&args),
         Command::Load(args) => service::load(&args),
         Command::Status(args) => service::status(&args),
+        Command::Results(args) => service::results(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Plan(args) => plan::run(&args),

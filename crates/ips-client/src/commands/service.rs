@@ -1,4 +1,4 @@
-//! `ips start|stop|get|list|remove|reset|save|load|status`: one request to a running `ips
+//! `ips start|stop|get|list|remove|reset|save|load|status|results`: one request to a running `ips
 //! serve`, printed for people or as the reply's JSON document with `--json`.
 
 use std::time::Duration;
@@ -6,7 +6,7 @@ use std::time::Duration;
 use clap::Args;
 use protocol::{
     GetReply, GetRequest, InspectionCountReply, InspectionsReply, MirroringReply, PathRequest,
-    RemoveRequest, SavedReply, ServiceCommand, StatusReply,
+    RemoveRequest, ResultsReply, SavedReply, ServiceCommand, StatusReply,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -210,4 +210,42 @@ pub fn load(args: &PathArgs) -> Result<String, CliError> {
         path: args.path.clone(),
     });
     call(&args.service, command, count_text)
+}
+
+/// `results`: the latest alignment and diagnosis, each as `ips align` / `ips diagnose` print
+/// them, under a line that says which inspections they used and whether those are still all.
+pub fn results(args: &ServiceArgs) -> Result<String, CliError> {
+    call(args, ServiceCommand::Results, |reply: &ResultsReply| {
+        let heading = |what: &str, inspections: &[String], current: bool| {
+            format!(
+                "== latest {what}, of {} inspection(s){}\n",
+                inspections.len(),
+                if current {
+                    ""
+                } else {
+                    " (stale: the inspections changed since)"
+                }
+            )
+        };
+        let mut text = String::new();
+        if let Some(alignment) = &reply.alignment {
+            text += &heading("alignment", &alignment.inspections, alignment.current);
+            text += &super::align::to_text(&alignment.report);
+        }
+        if let Some(diagnosis) = &reply.diagnosis {
+            text += &heading("diagnosis", &diagnosis.inspections, diagnosis.current);
+            text += &super::diagnose::to_text(&diagnosis.report);
+        }
+        if text.is_empty() {
+            text = "no alignment or diagnosis yet\n".to_owned();
+        }
+        if let Some(next) = &reply.next_touch {
+            let [x, y, z] = next.point_mm;
+            text += &format!(
+                "next suggested touch: ({x:.1}, {y:.1}, {z:.1}) mm: {}\n",
+                next.reason
+            );
+        }
+        text
+    })
 }

@@ -1,11 +1,14 @@
 """Drives the operator page in a real headless Chromium (Debian's chromium and chromium-driver,
 scripts/browser-env.sh) through Selenium: no console errors, the WebGL twin drawn (not a blank
-canvas), Get adds a `data-inspection-id` element, Align puts the rms in mm in #result, and at a
+canvas), another client's get shows up without a reload, Get adds a `data-inspection-id`
+element, Align puts the rms in mm in #result, Diagnose draws the diagnosis charts, and at a
 tablet's 800 px width nothing scrolls sideways and the buttons are finger-sized.
 
     python check_page.py URL SCREENSHOT.png EXPECTED_INSPECTIONS
 
-Prints one JSON line with what it saw; exits non-zero with the reason otherwise.
+Once the page shows EXPECTED_INSPECTIONS it prints `other-client` and reads one line from stdin:
+the id of an inspection another client took meanwhile, which must then appear on the page.
+At the end it prints one JSON line with what it saw; it exits non-zero with the reason otherwise.
 """
 
 import json
@@ -49,6 +52,23 @@ return colours.size;
 """
 
 
+# Pixels of the next suggested touch's violet (0x7c3aed, lit): blue well above red above green.
+COUNT_VIOLET = """
+const twin = document.getElementById('twin');
+const copy = document.createElement('canvas');
+copy.width = twin.width; copy.height = twin.height;
+const context = copy.getContext('2d');
+context.drawImage(twin, 0, 0);
+const pixels = context.getImageData(0, 0, copy.width, copy.height).data;
+let violet = 0;
+for (let i = 0; i < pixels.length; i += 4) {
+  const [r, g, b] = [pixels[i], pixels[i + 1], pixels[i + 2]];
+  if (b > r + 40 && r > g + 40) violet += 1;
+}
+return violet;
+"""
+
+
 def button(driver, label):
     return driver.find_element(By.XPATH, f"//button[normalize-space()='{label}']")
 
@@ -75,6 +95,10 @@ def main():
         driver.get(url)
         labels = [b.text for b in driver.find_elements(By.CSS_SELECTOR, "button[data-command]")]
         wait.until(lambda d: len(inspection_ids(d)) >= expected)
+        # Another client takes a touch while the page is open; no reload here.
+        print("other-client", flush=True)
+        other = sys.stdin.readline().strip()
+        wait.until(lambda d: other in inspection_ids(d))
         before = inspection_ids(driver)
         button(driver, "Get").click()
         wait.until(lambda d: len(inspection_ids(d)) == len(before) + 1)
@@ -84,9 +108,28 @@ def main():
         result = driver.find_element(By.ID, "result").text
         if " mm" not in result:
             raise SystemExit(f"#result has no mm: {result!r}")
+        # Diagnose: the verdict in #result, the charts and tables in the diagnosis panel.
+        button(driver, "Diagnose").click()
+        wait.until(lambda d: d.find_element(By.ID, "result").text.startswith("Diagnosis"))
+        wait.until(lambda d: d.execute_script(
+            "const p = document.getElementById('diagnosis-panel');"
+            "return !p.hidden && p.open && p.querySelector('svg rect') !== null"
+            " && p.querySelector('#alternatives') !== null;"
+        ))
+        diagnosis = driver.execute_script(
+            "const p = document.getElementById('diagnosis-panel');"
+            "return {summary: document.getElementById('diagnosis-summary').textContent,"
+            " bars: p.querySelectorAll('svg rect[fill=\"#2a6fdb\"]').length,"
+            " touches: p.querySelectorAll('#touches tr').length - 1,"
+            " width: p.querySelector('svg').getBoundingClientRect().width,"
+            " panel: p.getBoundingClientRect().width};"
+        )
+        if diagnosis["width"] > diagnosis["panel"] + 1:
+            raise SystemExit(f"the diagnosis plot is wider than its panel: {diagnosis}")
         # The live robot and the aligned part are drawn once their events arrived.
         wait.until(lambda d: d.execute_script(COUNT_COLOURS) > 20)
         colours = driver.execute_script(COUNT_COLOURS)
+        violet = driver.execute_script(COUNT_VIOLET)
         driver.save_screenshot(screenshot)
         # A tablet held upright: no sideways scrolling, buttons big enough for a finger.
         driver.set_window_size(800, 1280)
@@ -102,7 +145,9 @@ def main():
         errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
         if errors:
             raise SystemExit(f"console errors: {errors}")
-        print(json.dumps({"labels": labels, "added": added, "result": result, "colours": colours}))
+        listed = inspection_ids(driver)
+        print(json.dumps({"labels": labels, "other": other, "added": added, "result": result,
+                          "colours": colours, "violet": violet, "diagnosis": diagnosis, "listed": listed}))
     finally:
         driver.quit()
 
