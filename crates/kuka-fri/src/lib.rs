@@ -23,6 +23,8 @@ pub const MONITORING_MESSAGE_ID: u32 = 0x0024_5142;
 pub const COMMAND_MESSAGE_ID: u32 = 0x0003_4001;
 /// Largest datagram either side accepts; the SDK's buffers are 1500 bytes.
 pub const MAX_MESSAGE_BYTES: usize = 1500;
+/// Longest IO name the SDK holds (a 64-byte C string).
+pub const MAX_IO_NAME_BYTES: usize = 63;
 /// Joints of an LBR.
 pub const LBR_JOINTS: usize = 7;
 
@@ -95,8 +97,67 @@ pub struct MessageMonitorData {
     /// N m.
     #[prost(message, optional, tag = "5")]
     pub external_torque: Option<JointValues>,
+    /// The IOs the Sunrise application registered for FRI (`registerIO` on its FRI
+    /// configuration), each with its current value; empty when it registered none. FRI SDKs
+    /// 1.13 to 2.5 all carry them at this field number (older ones have no IO).
+    #[prost(message, repeated, tag = "8")]
+    pub read_io_request: Vec<FriIoValue>,
     #[prost(message, optional, tag = "15")]
     pub timestamp: Option<TimeStamp>,
+}
+
+/// One IO's value as FRI reports it. The name is `"Group.Name"` as the IO configuration in
+/// WorkVisual has it; booleans and digital IOs carry `digital_value`, analog ones
+/// `analog_value`.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct FriIoValue {
+    #[prost(string, required, tag = "1")]
+    pub name: String,
+    #[prost(enumeration = "FriIoType", required, tag = "2")]
+    pub io_type: i32,
+    #[prost(enumeration = "FriIoDirection", required, tag = "3")]
+    pub direction: i32,
+    #[prost(uint64, optional, tag = "4")]
+    pub digital_value: Option<u64>,
+    #[prost(double, optional, tag = "5")]
+    pub analog_value: Option<f64>,
+}
+
+impl FriIoValue {
+    /// A boolean input, as a touch-trigger probe wired to the controller appears.
+    pub fn boolean_input(name: &str, high: bool) -> Self {
+        Self {
+            name: name.to_owned(),
+            io_type: FriIoType::Boolean as i32,
+            direction: FriIoDirection::Input as i32,
+            digital_value: Some(u64::from(high)),
+            analog_value: None,
+        }
+    }
+
+    /// Whether a boolean or digital IO is set (any bit); `None` for an analog IO or a value
+    /// the message left out.
+    pub fn is_set(&self) -> Option<bool> {
+        match FriIoType::try_from(self.io_type).ok()? {
+            FriIoType::Boolean | FriIoType::Digital => self.digital_value.map(|v| v != 0),
+            FriIoType::Analog => None,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, prost::Enumeration)]
+#[repr(i32)]
+pub enum FriIoType {
+    Boolean = 0,
+    Digital = 1,
+    Analog = 2,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, prost::Enumeration)]
+#[repr(i32)]
+pub enum FriIoDirection {
+    Input = 0,
+    Output = 1,
 }
 
 #[derive(Clone, PartialEq, prost::Message)]
@@ -114,7 +175,7 @@ pub struct MessageEndOf {
 }
 
 /// What the controller sends every send period. Fields this crate does not model (IPO data,
-/// requested transformations, I/O) are skipped when decoding.
+/// requested transformations) are skipped when decoding.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct MonitoringMessage {
     #[prost(message, required, tag = "1")]

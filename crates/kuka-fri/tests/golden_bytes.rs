@@ -4,9 +4,9 @@
 //! crate: they pin the wire format against the encoder and the decoder at once.
 
 use kuka_fri::{
-    COMMAND_MESSAGE_ID, CommandMessage, ConnectionInfo, ConnectionQuality, FriError, JointValues,
-    MONITORING_MESSAGE_ID, MessageHeader, MessageMonitorData, MonitoringMessage, SessionState,
-    TimeStamp, encode,
+    COMMAND_MESSAGE_ID, CommandMessage, ConnectionInfo, ConnectionQuality, FriError,
+    FriIoDirection, FriIoType, FriIoValue, JointValues, MONITORING_MESSAGE_ID, MessageHeader,
+    MessageMonitorData, MonitoringMessage, SessionState, TimeStamp, encode,
 };
 
 /// A header-only command message: the answer of a monitoring client.
@@ -130,4 +130,40 @@ fn garbage_and_oversized_datagrams_are_refused() {
         MonitoringMessage::decode_checked(&[0u8; 2000]),
         Err(FriError::TooLarge(2000))
     ));
+}
+
+/// The monitor data with two IOs the Sunrise application registered for FRI: readIORequest is
+/// field 8 of the monitor data; in each value name = 1, type = 2, direction = 3, digital value
+/// = 4 (varint), analog value = 5 (fixed64), as the FRI client SDKs 1.13-2.5 number them.
+#[rustfmt::skip]
+const MONITOR_DATA_WITH_IO: [u8; 33] = [
+    // readIORequest (field 8 -> tag 0x42), 11 bytes: "P.T", BOOLEAN (0), INPUT (0), value 1
+    0x42, 0x0B, 0x0A, 0x03, b'P', b'.', b'T', 0x10, 0x00, 0x18, 0x00, 0x20, 0x01,
+    // readIORequest, 18 bytes: "A.V", ANALOG (2), OUTPUT (1), analog value 0.5 (fixed64)
+    0x42, 0x12, 0x0A, 0x03, b'A', b'.', b'V', 0x10, 0x02, 0x18, 0x01,
+    0x29, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0xE0, 0x3F,
+];
+
+#[test]
+fn io_values_match_the_hand_encoded_bytes() {
+    let data = MessageMonitorData {
+        read_io_request: vec![
+            FriIoValue::boolean_input("P.T", true),
+            FriIoValue {
+                name: "A.V".to_owned(),
+                io_type: FriIoType::Analog as i32,
+                direction: FriIoDirection::Output as i32,
+                digital_value: None,
+                analog_value: Some(0.5),
+            },
+        ],
+        ..MessageMonitorData::default()
+    };
+    assert_eq!(encode(&data), MONITOR_DATA_WITH_IO);
+    let decoded =
+        <MessageMonitorData as prost::Message>::decode(&MONITOR_DATA_WITH_IO[..]).expect("decodes");
+    assert_eq!(decoded, data);
+    assert_eq!(decoded.read_io_request[0].is_set(), Some(true));
+    // An analog IO is not a switch.
+    assert_eq!(decoded.read_io_request[1].is_set(), None);
 }

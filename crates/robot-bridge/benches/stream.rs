@@ -120,6 +120,7 @@ fn main() {
                 target: format!("127.0.0.1:{port}"),
                 send_period_ms: 1,
                 receive_multiplier: 1,
+                trigger_io: None,
             },
         })
         .expect("sim-robot");

@@ -70,3 +70,34 @@ fn bad_numeric_flags_exit_2_with_a_reason() {
         .collect();
     assert_refused(env!("CARGO_BIN_EXE_robot-bridge"), &cases);
 }
+
+#[test]
+fn bad_fri_inputs_exit_2_with_a_reason() {
+    let iiwa = |value: &'static str| -> Vec<&'static str> {
+        vec![
+            "--backend",
+            "iiwa",
+            "--robot-host",
+            "127.0.0.1",
+            "--rep",
+            "tcp://127.0.0.1:*",
+            "--pub",
+            "tcp://127.0.0.1:*",
+            "--fri-port",
+            "0",
+            "--fri-input",
+            value,
+        ]
+    };
+    let owned_cases = [
+        (iiwa("Probe.Trigger"), "is not NAME=INPUT"),
+        (iiwa("Probe.Trigger=DI8"), "'DI8' is not a digital input"),
+        (iiwa("=DI0"), "must be 1-63 ASCII characters"),
+        (iiwa("Probe.Trigger=X"), "'X' is not a digital input"),
+    ];
+    let cases: Vec<(&[&str], &str)> = owned_cases
+        .iter()
+        .map(|(args, reason)| (args.as_slice(), *reason))
+        .collect();
+    assert_refused(env!("CARGO_BIN_EXE_robot-bridge"), &cases);
+}

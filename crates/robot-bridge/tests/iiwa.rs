@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 
 use align_core::robots::ShippedRobot;
 use conformance::{Cell, Client, Truth, check_against_truth, mean_period_s, states, wait_until};
+use protocol::DigitalInput;
 use robot_bridge::backend::iiwa::IiwaConfig;
 use robot_bridge::{BackendConfig, Config, Handle};
 use serde_json::{Value, json};
@@ -23,10 +24,16 @@ use sim_robot::{FriSettings, SimHandle};
 
 /// A bridge with the iiwa back end on a free UDP port.
 fn iiwa_bridge() -> Handle {
+    iiwa_bridge_with_inputs(Vec::new())
+}
+
+/// The same, publishing the named FRI IOs as digital inputs.
+fn iiwa_bridge_with_inputs(inputs: Vec<(String, DigitalInput)>) -> Handle {
     robot_bridge::start(&Config {
         backend: BackendConfig::Iiwa(IiwaConfig {
             robot_host: "127.0.0.1".to_owned(),
             fri_port: 0,
+            inputs,
         }),
         rep: "tcp://127.0.0.1:*".to_owned(),
         publish: "tcp://127.0.0.1:*".to_owned(),
@@ -49,6 +56,12 @@ struct Simulator {
 
 impl Simulator {
     fn start(target: SocketAddr, send_period_ms: u32) -> Self {
+        Self::with_trigger_io(target, send_period_ms, None)
+    }
+
+    /// A controller whose application registered the boolean input `trigger_io` for FRI,
+    /// carrying the probe's trigger.
+    fn with_trigger_io(target: SocketAddr, send_period_ms: u32, trigger_io: Option<&str>) -> Self {
         let handle = sim_robot::start(&sim_robot::Config {
             robot: ShippedRobot::Iiwa14,
             rtde_listen: String::new(),
@@ -59,6 +72,7 @@ impl Simulator {
                 target: target.to_string(),
                 send_period_ms,
                 receive_multiplier: 1,
+                trigger_io: trigger_io.map(str::to_owned),
             },
         })
         .unwrap();
@@ -413,4 +427,85 @@ fn datagrams_that_are_not_the_controllers_are_dropped_and_counted() {
     assert_eq!(status["controller"], "connected");
     assert_eq!(status["reconnects"], 0);
     cell.stop();
+}
+
+/// The example part at its hidden pose, probed on the fly by the iiwa at 5 mm/s.
+fn probe_request() -> Value {
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let truth: Value = serde_json::from_str(
+        &std::fs::read_to_string(examples.join("step_block_ur10/truth.json")).unwrap(),
+    )
+    .unwrap();
+    json!({"command": "probe",
+        "mesh": examples.join("step_block_ur10/step_block.stl"), "mesh_scale": 0.001,
+        "base_from_part": truth["base_from_part"],
+        "tcp": {"xyz": [0.0, 0.0, 0.15], "rpy": [0.0, 0.0, 0.0]}, "tip_radius": 0.003,
+        "touches": 6, "on_the_fly_speeds_m_s": [0.005]})
+}
+
+/// A probe's trigger wired to the controller and registered for FRI as `Probe.Trigger`: the
+/// bridge publishes it as the input it was told (CI3, bit 11), high exactly while the ball is
+/// on the part. An IO the
+/// controller does not send leaves `digital_inputs` out rather than reporting it low.
+#[test]
+fn a_registered_fri_io_reaches_the_hw_state_as_the_named_input_while_the_probe_touches() {
+    let ci3: DigitalInput = "CI3".parse().unwrap();
+    let bridge = iiwa_bridge_with_inputs(vec![("Probe.Trigger".to_owned(), ci3)]);
+    let sim = Simulator::with_trigger_io(fri_address(&bridge), 5, Some("Probe.Trigger"));
+    let client = Client::new(&bridge, IiwaCell::SIDE);
+    client.wait_connected();
+    let sub = client.subscriber();
+    client.start_mirroring();
+    let plan = sim.send(probe_request());
+    assert_eq!(plan["ok"], true, "{plan}");
+    let windows: Vec<(f64, f64)> = plan["contacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            (
+                c["at_s"].as_f64().unwrap(),
+                c["released_s"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    let until_s = windows[1].1 + 0.05;
+    let mut high_per_touch = [0usize; 2];
+    loop {
+        let state = conformance::next_state(&sub);
+        let body = &state["body"];
+        let time_s = body["controller_time"].as_f64().unwrap();
+        if time_s > until_s {
+            break;
+        }
+        let bits = body["digital_inputs"]
+            .as_u64()
+            .unwrap_or_else(|| panic!("no digital_inputs: {state}"));
+        let touching = windows.iter().position(|(a, r)| (*a..*r).contains(&time_s));
+        let expected = if touching.is_some() { ci3.mask() } else { 0 };
+        assert_eq!(bits, expected, "at {time_s} s, contacts {windows:?}");
+        if let Some(touch @ 0..2) = touching {
+            high_per_touch[touch] += 1;
+        }
+    }
+    // 1 mm in and back out at 5 mm/s: over 0.2 s of contact, 40 messages at 5 ms.
+    assert!(
+        high_per_touch.iter().all(|n| *n >= 30),
+        "{high_per_touch:?}"
+    );
+    bridge.stop();
+    sim.handle.stop();
+
+    // The bridge told of an IO the application did not register: no bits, not zeros.
+    let bridge = iiwa_bridge_with_inputs(vec![("Probe.Other".to_owned(), ci3)]);
+    let sim = Simulator::with_trigger_io(fri_address(&bridge), 5, Some("Probe.Trigger"));
+    let client = Client::new(&bridge, IiwaCell::SIDE);
+    client.wait_connected();
+    let sub = client.subscriber();
+    client.start_mirroring();
+    for state in states(&sub, 5) {
+        assert!(state["body"].get("digital_inputs").is_none(), "{state}");
+    }
+    bridge.stop();
+    sim.handle.stop();
 }

@@ -16,12 +16,13 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use kuka_fri::{
-    CommandMessage, ConnectionInfo, ConnectionQuality, ControlMode, DriveState, JointValues,
-    LBR_JOINTS, MAX_MESSAGE_BYTES, MONITORING_MESSAGE_ID, MessageHeader, MessageMonitorData,
-    MonitoringMessage, OperationMode, RobotInfo, SafetyState, SessionState, TimeStamp, encode,
+    CommandMessage, ConnectionInfo, ConnectionQuality, ControlMode, DriveState, FriIoValue,
+    JointValues, LBR_JOINTS, MAX_MESSAGE_BYTES, MONITORING_MESSAGE_ID, MessageHeader,
+    MessageMonitorData, MonitoringMessage, OperationMode, RobotInfo, SafetyState, SessionState,
+    TimeStamp, encode,
 };
 
-use crate::Shared;
+use crate::{Sample, Shared};
 
 /// Messages over which the connection quality is graded.
 pub(crate) const WINDOW: usize = 100;
@@ -126,17 +127,20 @@ pub(crate) struct FriLink {
     pub(crate) target: SocketAddr,
     pub(crate) send_period: Duration,
     pub(crate) receive_multiplier: u32,
+    /// The boolean input carrying the probe's trigger, when the emulated application
+    /// registered one for FRI.
+    pub(crate) trigger_io: Option<String>,
 }
 
 fn monitoring_message(
     sequence: u32,
     reflected: u32,
-    time_s: f64,
-    q: &[f64],
+    sample: &Sample,
     session_state: SessionState,
     quality: ConnectionQuality,
     link: &FriLink,
 ) -> MonitoringMessage {
+    let (time_s, q) = (sample.time_s, &sample.q);
     let whole_s = time_s.floor();
     MonitoringMessage {
         header: MessageHeader {
@@ -154,6 +158,9 @@ fn monitoring_message(
         monitor_data: Some(MessageMonitorData {
             measured_joint_position: Some(JointValues { value: q.to_vec() }),
             // The simulator has no dynamics: it reports no torques rather than invented ones.
+            read_io_request: (link.trigger_io.iter())
+                .map(|name| FriIoValue::boolean_input(name, sample.digital_inputs != 0))
+                .collect(),
             timestamp: Some(TimeStamp {
                 sec: whole_s as u32,
                 nanosec: ((time_s - whole_s) * 1e9).round().min(999_999_999.0) as u32,
@@ -228,15 +235,8 @@ pub(crate) fn serve(mut socket: UdpSocket, link: FriLink, shared: Arc<Shared>) {
         if !shared.paused.load(Ordering::Relaxed) {
             let sample = shared.sample();
             let state = grader.session_state();
-            let message = monitoring_message(
-                sequence,
-                reflected,
-                sample.time_s,
-                &sample.q,
-                state,
-                grader.quality(),
-                &link,
-            );
+            let message =
+                monitoring_message(sequence, reflected, &sample, state, grader.quality(), &link);
             let _ = socket.send_to(&encode(&message), link.target);
             grader.on_sent(sequence);
             sequence = sequence.wrapping_add(1);

@@ -77,6 +77,10 @@ pub struct FriSettings {
     pub send_period_ms: u32,
     /// The client answers every n-th message.
     pub receive_multiplier: u32,
+    /// The name of a boolean input the emulated Sunrise application registers for FRI
+    /// (`registerIO`), which carries the probe's trigger, e.g. `Probe.Trigger`; `None`: the
+    /// messages carry no IO, as when the application registers none.
+    pub trigger_io: Option<String>,
 }
 
 impl Default for FriSettings {
@@ -85,6 +89,7 @@ impl Default for FriSettings {
             target: "127.0.0.1:30200".to_owned(),
             send_period_ms: 5,
             receive_multiplier: 1,
+            trigger_io: None,
         }
     }
 }
@@ -488,6 +493,15 @@ fn fri_link(settings: &FriSettings) -> Result<(UdpSocket, fri_server::FriLink), 
             "receive multiplier must be at least 1".to_owned(),
         ));
     }
+    if let Some(name) = &settings.trigger_io {
+        // The SDK holds IO names in 64-byte C strings.
+        if name.is_empty() || name.len() > kuka_fri::MAX_IO_NAME_BYTES || !name.is_ascii() {
+            return Err(SimError::Fri(format!(
+                "IO name '{name}' must be 1-{} ASCII characters, e.g. Probe.Trigger",
+                kuka_fri::MAX_IO_NAME_BYTES
+            )));
+        }
+    }
     let target: SocketAddr = settings
         .target
         .to_socket_addrs()
@@ -512,6 +526,7 @@ fn fri_link(settings: &FriSettings) -> Result<(UdpSocket, fri_server::FriLink), 
             target,
             send_period: Duration::from_millis(u64::from(settings.send_period_ms)),
             receive_multiplier: settings.receive_multiplier,
+            trigger_io: settings.trigger_io.clone(),
         },
     ))
 }

@@ -15,6 +15,13 @@
 //! that, or from a new session (its sequence counter started over), reconnects. Datagrams from
 //! another host than `--robot-host`, and datagrams that are not LBR monitoring messages, are
 //! counted and dropped.
+//!
+//! Digital inputs: FRI carries the IOs the Sunrise application registered for it (the monitor
+//! data's `readIORequest`, by name). [`IiwaConfig::inputs`] names which of them to publish in
+//! hwState's `digital_inputs` bit mask and as which bit (`Probe.Trigger=DI0`), so that a probe's
+//! trigger reaches `ips serve --trigger` as a UR's does. A named IO the controller does not send,
+//! or sends as an analog value, leaves `digital_inputs` out (unknown, not low) and is logged
+//! once with the IOs it does send.
 
 use std::net::{IpAddr, SocketAddr, ToSocketAddrs, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -25,7 +32,7 @@ use std::time::{Duration, Instant};
 
 use kuka_fri::{CommandMessage, MAX_MESSAGE_BYTES, MonitoringMessage, SessionState, encode};
 
-use protocol::RobotSide;
+use protocol::{DigitalInput, RobotSide};
 
 use super::{Backend, BackendKind, BackendSettings, Event, LinkState, OpenError, Sample};
 
@@ -43,6 +50,9 @@ pub struct IiwaConfig {
     pub robot_host: String,
     /// The UDP port to receive on; 0 picks a free one.
     pub fri_port: u16,
+    /// FRI IOs to publish as digital inputs: each registered IO's name (`Group.Name`) and the
+    /// hwState input it becomes.
+    pub inputs: Vec<(String, DigitalInput)>,
 }
 
 impl BackendSettings for IiwaConfig {
@@ -55,12 +65,13 @@ impl BackendSettings for IiwaConfig {
     }
 
     fn open(&self) -> Result<Box<dyn Backend>, OpenError> {
-        let backend = IiwaBackend::bind(&self.robot_host, self.fri_port).map_err(|source| {
+        let mut backend = IiwaBackend::bind(&self.robot_host, self.fri_port).map_err(|source| {
             OpenError::FriListen {
                 port: self.fri_port,
                 source,
             }
         })?;
+        backend.inputs = self.inputs.clone();
         Ok(Box::new(backend))
     }
 }
@@ -88,6 +99,10 @@ pub struct IiwaBackend {
     session: Option<Session>,
     announced_listening: bool,
     receiver_gone: bool,
+    /// FRI IOs published as digital inputs ([`IiwaConfig::inputs`]).
+    inputs: Vec<(String, DigitalInput)>,
+    /// Why the inputs were last left out, logged once per reason.
+    inputs_problem: Option<String>,
 }
 
 /// The controller as last heard.
@@ -134,6 +149,8 @@ impl IiwaBackend {
             session: None,
             announced_listening: false,
             receiver_gone: false,
+            inputs: Vec::new(),
+            inputs_problem: None,
         })
     }
 
@@ -173,11 +190,24 @@ impl IiwaBackend {
                 .is_some_and(|(previous, _, _)| sequence.wrapping_sub(*previous) > u32::MAX / 2),
         };
         if new_session {
+            let registered: Vec<&str> =
+                message.monitor_data.as_ref().map_or_else(Vec::new, |data| {
+                    data.read_io_request
+                        .iter()
+                        .map(|io| io.name.as_str())
+                        .collect()
+                });
+            // Which IOs the application registered: what a probe that never triggers needs.
             let description = format!(
-                "FRI from {peer}, send period {} ms, answering every {} message(s), session {}",
+                "FRI from {peer}, send period {} ms, answering every {} message(s), session {}, IOs for FRI: {}",
                 send_period.as_millis(),
                 message.receive_multiplier(),
-                link.session_state.unwrap_or("unknown")
+                link.session_state.unwrap_or("unknown"),
+                if registered.is_empty() {
+                    "none".to_owned()
+                } else {
+                    registered.join(", ")
+                }
             );
             self.session = Some(Session {
                 send_period,
@@ -219,8 +249,50 @@ impl IiwaBackend {
                 .as_ref()
                 .and_then(|info| info.safety_state),
             link: Some(link),
-            digital_inputs: None,
+            digital_inputs: self.digital_inputs(&message),
         }))
+    }
+
+    /// The configured FRI IOs as hwState's bit mask; `None` when none are configured, or one is
+    /// missing from the message or not a switch (logged once with the IOs the message has).
+    fn digital_inputs(&mut self, message: &MonitoringMessage) -> Option<u64> {
+        if self.inputs.is_empty() {
+            return None;
+        }
+        let registered = message
+            .monitor_data
+            .as_ref()
+            .map_or(&[][..], |data| &data.read_io_request[..]);
+        let mut bits = 0;
+        let mut problem = None;
+        for (name, input) in &self.inputs {
+            match registered.iter().find(|io| &io.name == name) {
+                Some(io) => match io.is_set() {
+                    Some(true) => bits |= input.mask(),
+                    Some(false) => {}
+                    None => problem = Some(format!("FRI IO '{name}' is analog or has no value")),
+                },
+                None => problem = Some(format!("the controller sends no FRI IO '{name}'")),
+            }
+        }
+        match problem {
+            None => {
+                self.inputs_problem = None;
+                Some(bits)
+            }
+            Some(problem) => {
+                if self.inputs_problem.as_ref() != Some(&problem) {
+                    let names: Vec<&str> = registered.iter().map(|io| io.name.as_str()).collect();
+                    tracing::warn!(
+                        %problem,
+                        registered = ?names,
+                        "digital inputs left out of hwState: register the IO for FRI in the Sunrise application (registerIO) and name it as the controller does"
+                    );
+                    self.inputs_problem = Some(problem);
+                }
+                None
+            }
+        }
     }
 }
 

@@ -1,6 +1,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, ValueEnum};
+use protocol::DigitalInput;
 use robot_bridge::backend::iiwa::{DEFAULT_FRI_PORT, IiwaConfig};
 use robot_bridge::backend::ur::{DEFAULT_PRIMARY_PORT, DEFAULT_RTDE_PORT, UrConfig};
 use robot_bridge::{BackendConfig, Config};
@@ -77,6 +78,28 @@ struct IiwaArgs {
         allow_negative_numbers = true,
     )]
     fri_port: u16,
+    /// Publish an IO the Sunrise application registered for FRI as a digital input of hwState,
+    /// NAME=INPUT (repeatable), e.g. --fri-input Probe.Trigger=DI0 for a touch-trigger probe
+    /// that `ips serve --trigger DI0` then captures on. NAME as the IO configuration has it
+    /// (Group.Name); INPUT one of DI0-DI7, CI0-CI7, TI0-TI1.
+    #[arg(long = "fri-input", value_name = "NAME=INPUT", value_parser = parse_fri_input)]
+    fri_inputs: Vec<(String, DigitalInput)>,
+}
+
+/// `Group.Name=DI0`: an FRI IO and the digital input it becomes.
+fn parse_fri_input(text: &str) -> Result<(String, DigitalInput), String> {
+    let (name, input) = text
+        .rsplit_once('=')
+        .ok_or_else(|| format!("'{text}' is not NAME=INPUT (e.g. Probe.Trigger=DI0)"))?;
+    let name = name.trim();
+    if name.is_empty() || name.len() > kuka_fri::MAX_IO_NAME_BYTES || !name.is_ascii() {
+        return Err(format!(
+            "FRI IO name '{name}' must be 1-{} ASCII characters",
+            kuka_fri::MAX_IO_NAME_BYTES
+        ));
+    }
+    let input = input.parse::<DigitalInput>().map_err(|e| e.to_string())?;
+    Ok((name.to_owned(), input))
 }
 
 /// As clap's own parser, with the reason users of earlier versions know.
@@ -121,6 +144,7 @@ impl Args {
             BackendChoice::Iiwa => BackendConfig::Iiwa(IiwaConfig {
                 robot_host,
                 fri_port: self.iiwa.fri_port,
+                inputs: self.iiwa.fri_inputs,
             }),
         };
         Config {

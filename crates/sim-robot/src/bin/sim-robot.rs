@@ -60,6 +60,11 @@ struct Args {
         allow_negative_numbers = true,
     )]
     fri_receive_multiplier: u32,
+    /// Name of a boolean input the emulated Sunrise application registers for FRI, carrying the
+    /// probe's trigger, e.g. Probe.Trigger (iiwa mode); without it the messages carry no IO.
+    /// The bridge reads it with `--fri-input NAME=DI0`.
+    #[arg(long, value_name = "NAME")]
+    fri_trigger_io: Option<String>,
     /// Control socket endpoint.
     #[arg(long, default_value = "tcp://*:5000")]
     control: String,
@@ -154,6 +159,7 @@ fn main() -> ExitCode {
             target: args.fri_target,
             send_period_ms: args.fri_send_period_ms,
             receive_multiplier: args.fri_receive_multiplier,
+            trigger_io: args.fri_trigger_io,
         },
     };
     let handle = match sim_robot::start(&config) {
