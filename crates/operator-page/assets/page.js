@@ -4,7 +4,8 @@
 import { createTwin } from './twin.js';
 
 const $ = (id) => document.getElementById(id);
-const mm = (m) => (m * 1000).toFixed(3);
+// Rounded first, so that a residual of -0.0001 mm reads 0.000, not -0.000.
+const mm = (m) => (Math.round(m * 1e6) / 1000 + 0).toFixed(3);
 const deg = (rad) => (rad * 180 / Math.PI).toFixed(2);
 const vec = (v, digits = 1) => '(' + v.map((x) => x.toFixed(digits)).join(', ') + ')';
 
@@ -12,6 +13,7 @@ const page = {
   status: null,
   state: null,
   selected: new Set(),
+  endpoints: null,
   lastError: null,
   busy: false,
 };
@@ -82,6 +84,10 @@ function renderConnection() {
   const mirroring = $('mirroring-state');
   const age = $('sample-age');
   const connected = doc && doc.connected;
+  // The endpoints stay as last told while the page server itself is out of reach.
+  if (doc && doc.endpoints) page.endpoints = doc.endpoints;
+  const ends = page.endpoints;
+  $('endpoints').textContent = ends ? 'service ' + ends.service + ', bridge ' + ends.bridge_rep + ' / ' + ends.bridge_pub : '';
   service.textContent = connected ? 'service: connected' : 'service: no answer';
   service.className = 'pill ' + (connected ? 'ok' : 'bad');
   const status = connected ? doc.status : null;

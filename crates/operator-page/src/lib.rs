@@ -48,6 +48,8 @@ pub struct Config {
     pub listen: String,
     /// The service's REP endpoint as bound (a wildcard address is reached on loopback).
     pub service: String,
+    /// robot-bridge's instruction REP endpoint, as the service uses it (shown on the page).
+    pub bridge_rep: String,
     /// robot-bridge's hardware-state PUB endpoint, for the live robot.
     pub bridge_pub: String,
     /// The session file the service loaded: the twin's part and robot.
@@ -132,7 +134,12 @@ pub fn start(config: &Config) -> Result<Handle, PageError> {
         &service_link::local_endpoint(&config.service),
         config.reply_timeout,
     );
-    let shared = Arc::new(Shared::new(link, scene));
+    let endpoints = state::Endpoints {
+        service: config.service.clone(),
+        bridge_rep: config.bridge_rep.clone(),
+        bridge_pub: config.bridge_pub.clone(),
+    };
+    let shared = Arc::new(Shared::new(link, scene, endpoints));
     let live_stop = Arc::new(AtomicBool::new(false));
     let live = live::spawn(
         &config.bridge_pub,

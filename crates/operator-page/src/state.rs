@@ -33,11 +33,23 @@ pub struct StateDocument {
     pub diagnosis_html: Option<String>,
 }
 
+/// Where the page's server reaches the service and the bridge: the thesis dialog's connection
+/// box.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Endpoints {
+    /// The alignment service's REP endpoint.
+    pub service: String,
+    /// The bridge's instruction REP endpoint (the service's) and its hwState PUB endpoint.
+    pub bridge_rep: String,
+    pub bridge_pub: String,
+}
+
 /// The `status` event: the service's status, or why there is none.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StatusDocument {
     /// Whether the service answered the last poll.
     pub connected: bool,
+    pub endpoints: Endpoints,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub status: Option<StatusReply>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -60,6 +72,7 @@ struct ResultsCache {
 pub struct Shared {
     pub link: ServiceLink,
     pub scene: Scene,
+    pub endpoints: Endpoints,
     results: Mutex<Option<ResultsCache>>,
     /// Wakes the poller at once after a command, so the page sees its effect without waiting.
     pub changed: Notify,
@@ -70,15 +83,17 @@ pub struct Shared {
 }
 
 impl Shared {
-    pub fn new(link: ServiceLink, scene: Scene) -> Self {
+    pub fn new(link: ServiceLink, scene: Scene, endpoints: Endpoints) -> Self {
         Self {
             link,
             scene,
+            endpoints: endpoints.clone(),
             results: Mutex::new(None),
             changed: Notify::new(),
             state: watch::Sender::new(None),
             status: watch::Sender::new(StatusDocument {
                 connected: false,
+                endpoints,
                 status: None,
                 error: Some("not asked yet".to_owned()),
             }),
@@ -171,11 +186,13 @@ pub async fn poll(shared: Arc<Shared>) {
         let status = match shared.fetch_status().await {
             Ok(status) => StatusDocument {
                 connected: true,
+                endpoints: shared.endpoints.clone(),
                 status: Some(status),
                 error: None,
             },
             Err(error) => StatusDocument {
                 connected: false,
+                endpoints: shared.endpoints.clone(),
                 status: None,
                 error: Some(error),
             },

@@ -99,6 +99,12 @@ fn a_headless_chromium_takes_a_touch_and_aligns_on_the_page() {
         ])
     );
     assert_eq!(seen["added"].as_array().unwrap().len(), 1, "{seen}");
+    let endpoints = seen["endpoints"].as_str().unwrap();
+    assert!(
+        endpoints.contains(&cell.bridge.rep_endpoint)
+            && endpoints.contains(&cell.bridge.pub_endpoint),
+        "{endpoints}"
+    );
     let listed = call(&client, json!({"command": "list"}));
     let service_ids: Vec<&str> = listed["data"]["inspections"]
         .as_array()

@@ -127,6 +127,19 @@ fn the_page_drives_the_service_and_follows_other_clients() {
         s["connected"] == true
     });
     assert_eq!(status["status"]["mirroring"], true);
+    // The connection box: where the page reaches the service and the bridge.
+    assert_eq!(
+        status["endpoints"]["service"],
+        cell.service.rep_endpoint.as_str()
+    );
+    assert_eq!(
+        status["endpoints"]["bridge_rep"],
+        cell.bridge.rep_endpoint.as_str()
+    );
+    assert_eq!(
+        status["endpoints"]["bridge_pub"],
+        cell.bridge.pub_endpoint.as_str()
+    );
 
     // The rest of the planned touches, then Align through the page: an rms in the reply.
     for q in &cell.planned[2..] {

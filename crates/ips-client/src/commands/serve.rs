@@ -127,6 +127,7 @@ fn start_page(
     operator_page::start(&operator_page::Config {
         listen: listen.to_owned(),
         service: rep_endpoint.to_owned(),
+        bridge_rep: config.bridge_rep.clone(),
         bridge_pub: config.bridge_pub.clone(),
         session: config.session.clone(),
         reply_timeout: crate::client::DEFAULT_REPLY_TIMEOUT,

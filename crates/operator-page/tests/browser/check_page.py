@@ -94,6 +94,8 @@ def main():
         wait = WebDriverWait(driver, 30)
         driver.get(url)
         labels = [b.text for b in driver.find_elements(By.CSS_SELECTOR, "button[data-command]")]
+        wait.until(lambda d: "bridge tcp://" in d.find_element(By.ID, "endpoints").text)
+        endpoints = driver.find_element(By.ID, "endpoints").text
         wait.until(lambda d: len(inspection_ids(d)) >= expected)
         # Another client takes a touch while the page is open; no reload here.
         print("other-client", flush=True)
@@ -146,7 +148,7 @@ def main():
         if errors:
             raise SystemExit(f"console errors: {errors}")
         listed = inspection_ids(driver)
-        print(json.dumps({"labels": labels, "other": other, "added": added, "result": result,
+        print(json.dumps({"labels": labels, "endpoints": endpoints, "other": other, "added": added, "result": result,
                           "colours": colours, "violet": violet, "diagnosis": diagnosis, "listed": listed}))
     finally:
         driver.quit()

@@ -97,6 +97,7 @@ impl SimCell {
         operator_page::start(&operator_page::Config {
             listen: "127.0.0.1:0".to_owned(),
             service: self.service.rep_endpoint.clone(),
+            bridge_rep: self.bridge.rep_endpoint.clone(),
             bridge_pub: self.bridge.pub_endpoint.clone(),
             session: self.session.clone(),
             reply_timeout: Duration::from_secs(10),
