@@ -40,10 +40,10 @@ pub use io::{DigitalInput, InputBank, NotAnInput};
 pub use journal::JournalEntry;
 pub use pose::Pose;
 pub use service::{
-    AlignCloudRequest, GetReply, GetRequest, InspectionCountReply, InspectionsReply, LatestResult,
-    MAX_SERVICE_REQUEST_BYTES, MirroringReply, NextTouchHint, PathRequest, RemoveRequest,
-    ReplyError, ResultsReply, SERVICE, SavedReply, ServiceCommand, ServiceReply, ServiceReplyBody,
-    ServiceRequest, StatusReply, parse_service_request, service_reply_error, service_reply_ok,
-    service_request,
+    AlignCloudRequest, BallPlace, GetReply, GetRequest, InspectionCountReply, InspectionsReply,
+    LatestResult, MAX_SERVICE_REQUEST_BYTES, MirroringReply, NextTouchHint, PathRequest,
+    RemoveRequest, ReplyError, ResultsReply, SERVICE, SavedReply, ServiceCommand, ServiceReply,
+    ServiceReplyBody, ServiceRequest, StatusReply, parse_service_request, service_reply_error,
+    service_reply_ok, service_request,
 };
 pub use session::{Inspection, SessionFile};

@@ -376,6 +376,20 @@ pub struct MirroringReply {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InspectionsReply {
     pub inspections: Vec<Inspection>,
+    /// Where each inspection's ball was, as `get` and `align` place it (the kinematics in use
+    /// and the session's joint corrections); inspections with joints only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub balls: Vec<BallPlace>,
+}
+
+/// An inspection's ball in the robot's base frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BallPlace {
+    pub id: String,
+    /// The ball centre, mm.
+    pub centre_mm: [f64; 3],
+    /// The tool's axis (TCP z) at the touch: the direction the probe moved in.
+    pub approach: [f64; 3],
 }
 
 /// `remove`, `reset` and `load`: how many inspections are left.

@@ -334,3 +334,63 @@ fn results_hold_the_latest_alignment_and_diagnosis_and_say_when_they_are_stale()
     assert_eq!(results["diagnosis"]["serial"], 2);
     fixture.finish();
 }
+
+/// `list` places every ball where `align` does: through the session's declared joint
+/// corrections (here a 2 mrad shoulder offset, which moves the balls by about a millimetre).
+#[test]
+fn list_places_the_balls_as_align_does_with_the_sessions_joint_corrections() {
+    let folder =
+        std::env::temp_dir().join(format!("cobot-align-requests-balls-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&folder);
+    std::fs::create_dir_all(&folder).unwrap();
+    let mut session: Value =
+        serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
+    let absolute = |relative: &Value| json!(example(relative.as_str().unwrap()));
+    session["robot"]["urdf"] = absolute(&session["robot"]["urdf"]);
+    session["part"]["mesh"] = absolute(&session["part"]["mesh"]);
+    session["robot"]["joint_offsets"] = json!([0.0, 0.002, 0.0, 0.0, 0.0, 0.0]);
+    let path = folder.join("corrected.json");
+    std::fs::write(&path, session.to_string()).unwrap();
+    let service = start(&Config {
+        session: path.clone(),
+        journal: folder.join("inspections.journal"),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        bridge_rep: "tcp://127.0.0.1:1".to_owned(),
+        bridge_pub: "tcp://127.0.0.1:1".to_owned(),
+        max_sample_age_s: 0.1,
+        max_tool_speed_m_s: 0.005,
+        data_dirs: vec![folder.clone()],
+        keep_session_inspections: true,
+        trigger: None,
+    })
+    .unwrap();
+    let context = zmq::Context::new();
+    let socket = context.socket(zmq::REQ).unwrap();
+    socket.set_linger(0).unwrap();
+    socket.set_rcvtimeo(10_000).unwrap();
+    socket.connect(&service.rep_endpoint).unwrap();
+    let request = json!({"header": {"from": "ips", "to": "align", "type": "request"},
+                         "body": {"command": "list"}});
+    socket.send(request.to_string().as_bytes(), 0).unwrap();
+    let reply: Value = serde_json::from_slice(&socket.recv_bytes(0).unwrap()).unwrap();
+    let balls = reply["body"]["data"]["balls"].as_array().unwrap().clone();
+    let corrected = align_service::session::LoadedSession::load(&path).unwrap();
+    let nominal = align_service::session::LoadedSession::load(&example("session.json")).unwrap();
+    assert_eq!(balls.len(), corrected.touches.len());
+    for ((ball, touch), uncorrected) in balls.iter().zip(&corrected.touches).zip(&nominal.touches) {
+        assert_eq!(ball["id"], touch.id.as_str());
+        let centre_m: Vec<f64> = (0..3)
+            .map(|axis| ball["centre_mm"][axis].as_f64().unwrap() * 1e-3)
+            .collect();
+        let from = |p: &nalgebra::Point3<f64>| {
+            (0..3)
+                .map(|axis| (centre_m[axis] - p[axis]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        assert!(from(&touch.point) < 1e-9, "{ball} vs {:?}", touch.point);
+        assert!(from(&uncorrected.point) > 5e-4, "the offset moves the ball");
+    }
+    service.stop();
+    let _ = std::fs::remove_dir_all(&folder);
+}

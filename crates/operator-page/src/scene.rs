@@ -8,9 +8,7 @@ use std::path::Path;
 use align_core::kinematics::Chain;
 use align_core::tool::Tool;
 use align_service::BadInput;
-use align_service::session::{LoadedSession, base_from_flange};
-use nalgebra::Isometry3;
-use protocol::session::Inspection;
+use align_service::session::LoadedSession;
 use serde::Serialize;
 
 use crate::robot_shapes::{LinkPose, RobotShapes, ShapeDocument};
@@ -60,14 +58,25 @@ pub struct LiveRobot {
     pub controller_time_s: f64,
 }
 
-/// A captured inspection where the twin draws it.
+/// A captured inspection where the twin draws it: where the service places its ball (`list`'s
+/// `balls`: the kinematics in use, the session's joint corrections), in metres.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TouchPoint {
     pub id: String,
-    /// The ball centre, m (nominal kinematics: the calibrated ones differ by millimetres).
+    /// The ball centre, m.
     pub ball_centre_m: [f64; 3],
     /// The tool's axis at the touch, unit vector: the approach line.
     pub approach: [f64; 3],
+}
+
+impl From<&protocol::BallPlace> for TouchPoint {
+    fn from(ball: &protocol::BallPlace) -> Self {
+        Self {
+            id: ball.id.clone(),
+            ball_centre_m: ball.centre_mm.map(|v| v * 1e-3),
+            approach: ball.approach,
+        }
+    }
 }
 
 /// The session's robot, tool and part, loaded once when the page starts.
@@ -150,22 +159,5 @@ impl Scene {
                 .map(|robot| robot.link_poses(q))
                 .unwrap_or_default(),
         })
-    }
-
-    /// Where each inspection's ball was; inspections that cannot be placed are left out.
-    pub fn touches(&self, inspections: &[Inspection]) -> Vec<TouchPoint> {
-        inspections
-            .iter()
-            .filter_map(|inspection| {
-                let flange: Isometry3<f64> =
-                    base_from_flange(inspection, Some(&self.chain)).ok()?;
-                let tcp = self.tool.base_from_tcp(&flange);
-                Some(TouchPoint {
-                    id: inspection.id.clone(),
-                    ball_centre_m: triple(&tcp.translation.vector),
-                    approach: triple(&(tcp.rotation * nalgebra::Vector3::z())),
-                })
-            })
-            .collect()
     }
 }

@@ -161,7 +161,7 @@ impl Shared {
         let ids: Vec<String> = list.inspections.iter().map(|i| i.id.clone()).collect();
         let (results, diagnosis_html) = self.fetch_results(results_serial, &ids).await?;
         Ok(StateDocument {
-            touches: self.scene.touches(&list.inspections),
+            touches: list.balls.iter().map(TouchPoint::from).collect(),
             results,
             diagnosis_html,
             inspections: list.inspections,

@@ -101,6 +101,18 @@ fn the_page_drives_the_service_and_follows_other_clients() {
         state["state"]["inspections"], listed["data"]["inspections"],
         "/api/state shows the service's list"
     );
+    // The twin's touches are where the service places the balls, not a second computation.
+    let balls = listed["data"]["balls"].as_array().unwrap();
+    let touches = state["state"]["touches"].as_array().unwrap();
+    assert_eq!(balls.len(), touches.len());
+    for (ball, touch) in balls.iter().zip(touches) {
+        assert_eq!(ball["id"], touch["id"]);
+        for axis in 0..3 {
+            let want = ball["centre_mm"][axis].as_f64().unwrap() * 1e-3;
+            let got = touch["ball_centre_m"][axis].as_f64().unwrap();
+            assert!((got - want).abs() < 1e-12, "{ball} vs {touch}");
+        }
+    }
     assert_eq!(state["status"]["mirroring"], true);
 
     // Another client's get shows up on the open stream, no reload.

@@ -12,9 +12,9 @@ use nalgebra::{DVector, Vector3};
 use protocol::reports::{AlignReport, CloudReport, DiagnoseReport};
 use protocol::session::{Inspection, SavedResult, SessionFile, SessionResults};
 use protocol::{
-    AlignCloudRequest, Command, GetReply, InspectionCountReply, InspectionsReply, JournalEntry,
-    LatestResult, MirroringReply, NextTouchHint, ProtocolError, ResultsReply, RobotSide,
-    SavedReply, ServiceCommand, ServiceReply, StatusReply,
+    AlignCloudRequest, BallPlace, Command, GetReply, InspectionCountReply, InspectionsReply,
+    JournalEntry, LatestResult, MirroringReply, NextTouchHint, ProtocolError, ResultsReply,
+    RobotSide, SavedReply, ServiceCommand, ServiceReply, StatusReply,
 };
 use reply_socket::{ReplySocket, Wait};
 use serde::Serialize;
@@ -72,6 +72,9 @@ pub(crate) struct Service {
     /// The part and its nominal pose, to say where each touch's ball is.
     pub part_mesh: align_core::geometry::Mesh,
     pub base_from_part_nominal: nalgebra::Isometry3<f64>,
+    /// The session's declared joint corrections (`robot.joint_offsets`, ...), applied to the
+    /// joints of every touch placed here as `align` applies them.
+    pub corrections: crate::session::JointCorrections,
     /// The session robot's chain as its description has it (`chain` may be calibrated).
     pub nominal_chain: Chain,
     /// The controller's factory calibration, learnt from the bridge on `start`.
@@ -193,6 +196,7 @@ impl Service {
             ServiceCommand::Get(get) => reply(self.get(get.time_s)),
             ServiceCommand::List => reply(Ok(InspectionsReply {
                 inspections: self.inspections.clone(),
+                balls: self.balls(),
             })),
             ServiceCommand::Remove(remove) => reply(self.remove(remove.ids)),
             ServiceCommand::Reset => reply(self.reset()),
@@ -408,11 +412,39 @@ impl Service {
         }
     }
 
+    /// Where the inspection's TCP (the ball's centre) was: the joints as the session's model
+    /// uses them (its declared corrections applied) through the kinematics in use (the
+    /// controller's calibration when it reported one), as `align` places it. `None` for an
+    /// inspection given as a flange pose.
+    fn base_from_tcp(&self, inspection: &Inspection) -> Option<nalgebra::Isometry3<f64>> {
+        let q = inspection.q.as_ref()?;
+        let q = self
+            .corrections
+            .corrected(q, inspection.qd.as_deref(), &self.chain);
+        Some(self.tool.base_from_tcp(&self.chain.forward_unchecked(&q)))
+    }
+
+    /// `list`'s ball places.
+    fn balls(&self) -> Vec<BallPlace> {
+        let triple = |v: Vector3<f64>| [v.x, v.y, v.z];
+        self.inspections
+            .iter()
+            .filter_map(|inspection| {
+                let tcp = self.base_from_tcp(inspection)?;
+                Some(BallPlace {
+                    id: inspection.id.clone(),
+                    centre_mm: triple(tcp.translation.vector * 1e3),
+                    approach: triple(tcp.rotation * Vector3::z()),
+                })
+            })
+            .collect()
+    }
+
     /// The reply to `get`: the inspection, its ball centre, and how far that is from the part's
     /// surface at the nominal pose, with a warning when it is too far to be a touch of it.
     fn where_the_ball_is(&self, inspection: Inspection) -> GetReply {
         let next_touch = self.next_touch();
-        let Some(q) = &inspection.q else {
+        let Some(tcp) = self.base_from_tcp(&inspection) else {
             return GetReply {
                 inspection,
                 ball_centre_mm: None,
@@ -422,11 +454,7 @@ impl Service {
                 next_touch,
             };
         };
-        let centre = self
-            .tool
-            .base_from_tcp(&self.chain.forward_unchecked(q))
-            .translation
-            .vector;
+        let centre = tcp.translation.vector;
         let in_part = self.base_from_part_nominal.inverse() * nalgebra::Point3::from(centre);
         let surface = self.part_mesh.closest_point(&in_part);
         let distance_m = surface.signed_distance - self.tool.tip_radius_m;
@@ -464,8 +492,7 @@ impl Service {
             .inspections
             .iter()
             .filter_map(|inspection| {
-                let q = inspection.q.as_ref()?;
-                let tcp = self.tool.base_from_tcp(&self.chain.forward_unchecked(q));
+                let tcp = self.base_from_tcp(inspection)?;
                 Some(TakenTouch {
                     ball_centre: nalgebra::Point3::from(tcp.translation.vector),
                     approach: Some(tcp.rotation * Vector3::z()),

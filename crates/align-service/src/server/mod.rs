@@ -298,6 +298,7 @@ pub fn start(config: &Config) -> Result<Handle, ServiceError> {
         files,
         nominal_chain: chain.clone(),
         chain,
+        corrections: loaded.corrections,
         tool: loaded.tool,
         part_mesh: loaded.mesh,
         base_from_part_nominal: loaded.base_from_part_nominal,
