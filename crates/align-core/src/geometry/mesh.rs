@@ -9,7 +9,7 @@
 
 use std::sync::OnceLock;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d_f64::math::Vector as GlamVector;
 use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
@@ -297,6 +297,33 @@ impl Mesh {
     /// Axis-aligned bounds (min, max) in the mesh frame.
     pub fn bounds(&self) -> (Point3<f64>, Point3<f64>) {
         self.bounds
+    }
+
+    /// Largest distance between the surface placed at `a` and placed at `b` (both
+    /// world_from_mesh), both ways, over vertices, edge midpoints and triangle centroids. Zero
+    /// for a cylinder turned about its own axis: it measures where the surface is, not how the
+    /// mesh is labelled.
+    pub fn deviation_m(&self, a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+        let b_from_a = b.inverse() * a;
+        let a_from_b = b_from_a.inverse();
+        let vertices: Vec<Point3<f64>> = self.vertices().collect();
+        let samples = self.triangles().iter().flat_map(|triangle| {
+            let [p, q, r] = triangle.map(|i| vertices[i as usize]);
+            [
+                Point3::from((p.coords + q.coords + r.coords) / 3.0),
+                Point3::from((p.coords + q.coords) / 2.0),
+            ]
+        });
+        vertices
+            .iter()
+            .copied()
+            .chain(samples)
+            .map(|s| {
+                let there = self.closest_point(&(b_from_a * s)).signed_distance.abs();
+                let back = self.closest_point(&(a_from_b * s)).signed_distance.abs();
+                there.max(back)
+            })
+            .fold(0.0, f64::max)
     }
 
     /// The closest surface point to `query` (mesh frame), its outward normal and signed distance.

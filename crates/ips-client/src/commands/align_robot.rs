@@ -79,6 +79,20 @@ pub struct AlignRobotOutput {
     pub iterations: usize,
     pub cloud_points: usize,
     pub time_s: f64,
+    /// True when another pose (`twin`) explains the scan as well: the scan cannot tell them.
+    pub ambiguous: bool,
+    /// The best other pose the half-turn checks found (large deltas), ambiguous or not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub twin: Option<TwinJson>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct TwinJson {
+    pub base_pose: BasePoseJson,
+    pub q: Vec<f64>,
+    /// Coarse keypoints it explains, and the fit's.
+    pub coverage: i64,
+    pub fit_coverage: i64,
 }
 
 /// The command: prints the fitted robot.
@@ -150,6 +164,16 @@ pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {
         iterations: fit.iterations,
         cloud_points: cloud.len(),
         time_s: fit.time_s,
+        ambiguous: fit.twin.as_ref().is_some_and(|twin| twin.ambiguous),
+        twin: fit.twin.as_ref().map(|twin| {
+            let (xyz, rpy) = xyz_rpy(&twin.world_from_root);
+            TwinJson {
+                base_pose: BasePoseJson { xyz, rpy },
+                q: twin.q.clone(),
+                coverage: twin.coverage,
+                fit_coverage: twin.fit_coverage,
+            }
+        }),
     })
 }
 
@@ -190,6 +214,15 @@ impl AlignRobotOutput {
             self.iterations,
             self.time_s * 1e3
         );
+        if let (true, Some(twin)) = (self.ambiguous, &self.twin) {
+            let q: Vec<String> = twin.q.iter().map(|v| format!("{v:.4}")).collect();
+            text += &format!(
+                "AMBIGUOUS: another pose explains the scan as well ({} keypoints against {}): joints [{}]; a joint reading or a touch tells them apart\n",
+                twin.coverage,
+                twin.fit_coverage,
+                q.join(", ")
+            );
+        }
         text
     }
 }

@@ -6,5 +6,6 @@ pub mod fit;
 
 pub use body::{ArticulatedBody, BodyError, BodyLink, BodyParameter};
 pub use fit::{
-    JointFit, LinkFit, RobotFit, RobotFitError, RobotFitOptions, align_robot, searches_globally,
+    JointFit, LinkFit, RobotFit, RobotFitError, RobotFitOptions, RobotTwin, align_robot,
+    searches_globally,
 };

@@ -8,12 +8,40 @@ use super::RobotFitOptions;
 use super::context::FitContext;
 use super::placed::{Placed, coverage, reach_m};
 use super::refine::refine;
-use super::report::{FinalState, final_state};
+use super::report::{FinalState, RobotTwin, final_state};
 use super::tree::{Window, search_order, spins_in_place};
 use crate::registration::articulated::body::JointAxis;
 
 /// Single-flip states a global fit turns once more (see [`FitContext::flip_check`]).
 const FLIP_RUNNERS_UP: usize = 2;
+
+/// A state is another pose of the robot when some link's surface moves more than this: the
+/// trials' success threshold.
+const TWIN_DISTINCT_M: f64 = 1e-3;
+
+/// Vertices of a link compared for [`TWIN_DISTINCT_M`]: enough to see a surface move by a
+/// millimetre, few enough to cost nothing beside the fit.
+const TWIN_SAMPLES_PER_LINK: usize = 400;
+
+/// [`crate::geometry::Mesh::deviation_m`] over at most [`TWIN_SAMPLES_PER_LINK`] vertices.
+fn sampled_deviation_m(
+    mesh: &crate::geometry::Mesh,
+    a: &Isometry3<f64>,
+    b: &Isometry3<f64>,
+) -> f64 {
+    let b_from_a = b.inverse() * a;
+    let a_from_b = b_from_a.inverse();
+    let count = mesh.vertices().count();
+    let stride = count.div_ceil(TWIN_SAMPLES_PER_LINK).max(1);
+    mesh.vertices()
+        .step_by(stride)
+        .map(|v| {
+            let there = mesh.closest_point(&(b_from_a * v)).signed_distance.abs();
+            let back = mesh.closest_point(&(a_from_b * v)).signed_distance.abs();
+            there.max(back)
+        })
+        .fold(0.0, f64::max)
+}
 
 impl FitContext<'_> {
     /// After a global search: a joint whose own links turn in place about its axis (a nearly round
@@ -94,12 +122,14 @@ impl FitContext<'_> {
     /// degrees), the copy is not exact and the fit can sit on one pinned at the limits, with a
     /// chain of joints each a half turn off; turning one of them back alone leaves the rest of the
     /// chain explaining the scan no better, so only two flips together reach the true state.
-    /// Returns the iterations.
+    /// Returns the iterations, and every state it scored but did not keep (the one it started
+    /// from, when a flip replaced it): where [`FitContext::twin`] looks for an equally good
+    /// other pose.
     pub(super) fn flip_check(
         &self,
         world_from_root: &mut Isometry3<f64>,
         q: &mut Vec<f64>,
-    ) -> usize {
+    ) -> (usize, Vec<Isometry3<f64>>, Vec<Vec<f64>>) {
         let FitContext {
             body,
             scan,
@@ -131,6 +161,7 @@ impl FitContext<'_> {
             *iterations += spent;
             Some((score(&trial_base, &trial_q), trial_base, trial_q))
         };
+        let mut left: Vec<(Isometry3<f64>, Vec<f64>)> = Vec::new();
         for index in 0..order.len() {
             let Some((trial_score, trial_base, trial_q)) =
                 flip(world_from_root, q, index, &mut iterations)
@@ -139,10 +170,14 @@ impl FitContext<'_> {
             };
             if trial_score > best {
                 best = trial_score;
+                left.push((*world_from_root, q.clone()));
                 *q = trial_q;
                 *world_from_root = trial_base;
-            } else if global {
-                runners_up.push((trial_score, index, trial_base, trial_q));
+            } else {
+                left.push((trial_base, trial_q.clone()));
+                if global {
+                    runners_up.push((trial_score, index, trial_base, trial_q));
+                }
             }
         }
         runners_up.sort_by_key(|(trial_score, ..)| std::cmp::Reverse(*trial_score));
@@ -156,12 +191,78 @@ impl FitContext<'_> {
                 };
                 if trial_score > best {
                     best = trial_score;
+                    left.push((*world_from_root, q.clone()));
                     *q = trial_q;
                     *world_from_root = trial_base;
+                } else {
+                    left.push((trial_base, trial_q));
                 }
             }
         }
-        iterations
+        let (bases, qs) = left.into_iter().unzip();
+        (iterations, bases, qs)
+    }
+
+    /// The best of `others` (states the flip check scored and left) that puts some link's
+    /// surface more than [`TWIN_DISTINCT_M`] from where the fit has it, scored as the flip check
+    /// scores (coarse keypoints within the narrowest band) against the fit: a wrist turned a half
+    /// turn with the next joint mirrored, on links nearly symmetric under that turn, scores
+    /// within a few keypoints of the truth, and the scan cannot tell the two apart. Ambiguous
+    /// when the fit explains fewer than `min_link_points` keypoints more: the evidence the
+    /// fit asks of a link to call it seen, and of a candidate to replace its state.
+    pub(super) fn twin(
+        &self,
+        world_from_root: &Isometry3<f64>,
+        q: &[f64],
+        others_base: &[Isometry3<f64>],
+        others_q: &[Vec<f64>],
+    ) -> Option<RobotTwin> {
+        let FitContext {
+            body,
+            scan,
+            options,
+            ..
+        } = *self;
+        let with_surface: Vec<usize> = (0..body.links().len())
+            .filter(|&l| body.links()[l].surface.is_some())
+            .collect();
+        let score = |base: &Isometry3<f64>, q: &[f64]| {
+            coverage(
+                body,
+                scan.coarse,
+                base,
+                q,
+                &with_surface,
+                options.band_min_m,
+                options.parallel,
+            )
+        };
+        let fit_poses = body.link_poses(world_from_root, q);
+        let distinct = |base: &Isometry3<f64>, other_q: &[f64]| {
+            let poses = body.link_poses(base, other_q);
+            with_surface.iter().any(|&link| {
+                let mesh = body.links()[link].surface.as_ref().expect("has surface");
+                sampled_deviation_m(mesh, &fit_poses[link], &poses[link]) > TWIN_DISTINCT_M
+            })
+        };
+        let fit_coverage = score(world_from_root, q);
+        let mut scored: Vec<(i64, usize)> = others_q
+            .iter()
+            .enumerate()
+            .map(|(i, other_q)| (score(&others_base[i], other_q), i))
+            .collect();
+        scored.sort_by_key(|(coverage, _)| std::cmp::Reverse(*coverage));
+        let (coverage, index) = scored
+            .into_iter()
+            .find(|&(_, i)| distinct(&others_base[i], &others_q[i]))?;
+        let margin = i64::try_from(options.min_link_points).unwrap_or(i64::MAX);
+        Some(RobotTwin {
+            world_from_root: others_base[index],
+            q: others_q[index].clone(),
+            coverage,
+            fit_coverage,
+            ambiguous: fit_coverage - coverage < margin,
+        })
     }
 
     /// A base that is not round about joint 1 shows its turn about that axis, but the fit can end

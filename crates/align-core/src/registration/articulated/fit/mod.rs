@@ -76,7 +76,7 @@ use report::final_state;
 use tree::search_order;
 
 pub use options::RobotFitOptions;
-pub use report::{JointFit, LinkFit, RobotFit};
+pub use report::{JointFit, LinkFit, RobotFit, RobotTwin};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RobotFitError {
@@ -253,7 +253,8 @@ pub fn align_robot(
             false,
         );
     }
-    iterations += fit.flip_check(&mut world_from_root, &mut q);
+    let (spent, others_base, others_q) = fit.flip_check(&mut world_from_root, &mut q);
+    iterations += spent;
     if round_base.is_none() {
         iterations += fit.base_turn_check(&mut world_from_root, &mut q);
     }
@@ -282,6 +283,16 @@ pub fn align_robot(
             q[parameter] = q0[parameter];
         }
     }
+    // A joint the scan does not show is not what tells a twin apart.
+    let mut others_q = others_q;
+    for other in &mut others_q {
+        for (parameter, seen) in observed.iter().enumerate() {
+            if !seen {
+                other[parameter] = q0[parameter];
+            }
+        }
+    }
+    let twin = fit.twin(&world_from_root, &q, &others_base, &others_q);
     let with_base = round_base
         .and(search_order(body).first().copied())
         .filter(|&first| observed[first]);
@@ -307,6 +318,7 @@ pub fn align_robot(
         iterations,
         rms_m: (sum / matches.len().max(1) as f64).sqrt(),
         time_s: started.elapsed().as_secs_f64(),
+        twin,
     })
 }
 

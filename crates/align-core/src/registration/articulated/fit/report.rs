@@ -29,6 +29,20 @@ pub struct JointFit {
     pub turns_with_base: bool,
 }
 
+/// Another pose of the robot the fit also tried, nearly as good: a wrist a half turn round with
+/// the next joint mirrored, on links nearly symmetric under the turn.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotTwin {
+    pub world_from_root: Isometry3<f64>,
+    pub q: Vec<f64>,
+    /// Coarse keypoints it explains within the narrowest band, and the fit's.
+    pub coverage: i64,
+    pub fit_coverage: i64,
+    /// The scan cannot tell the fit from the twin: the fit explains fewer than
+    /// `min_link_points` keypoints more (a twin that explains more would have replaced it).
+    pub ambiguous: bool,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobotFit {
     pub world_from_root: Isometry3<f64>,
@@ -38,6 +52,9 @@ pub struct RobotFit {
     pub iterations: usize,
     pub rms_m: f64,
     pub time_s: f64,
+    /// The best other pose the half-turn checks found (large deltas only: a small delta's start
+    /// rules half turns out), and whether the scan tells it from the fit.
+    pub twin: Option<RobotTwin>,
 }
 
 /// The fit's correspondences on the exact surfaces, per-link fits and observed parameters.

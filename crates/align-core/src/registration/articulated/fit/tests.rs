@@ -309,3 +309,75 @@ fn a_base_turned_about_its_first_axis_takes_the_start_angle_and_keeps_the_axis()
     assert!(turned.rotation.angle_to(&start.rotation) < 0.05);
     assert!(candidate.rotation.angle_to(&start.rotation) > 1.9);
 }
+
+/// The forked-wrist robot with a box on its wrist, on the side away from joint 5's axis: under
+/// the wrist's half turn (joint 4 + pi, joint 5 mirrored, joint 6 + pi) every other link and
+/// the flange stay where they are and only the box moves, to the other side.
+fn keyed_wrist_urdf(key_size_m: f64) -> String {
+    FORKED_WRIST_URDF.replace(
+        r#"<link name="wrist"><visual><origin rpy="1.5707963 0 0"/><geometry><cylinder radius="0.028" length="0.07"/></geometry></visual></link>"#,
+        &format!(
+            r#"<link name="wrist"><visual><origin rpy="1.5707963 0 0"/><geometry><cylinder radius="0.028" length="0.07"/></geometry></visual>
+    <visual><origin xyz="0 0 {z}"/><geometry><box size="{s} {s} {s}"/></geometry></visual></link>"#,
+            z = 0.028 + key_size_m / 2.0,
+            s = key_size_m
+        ),
+    )
+}
+
+#[test]
+fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart() {
+    let options = RobotFitOptions::default();
+    let truth = Isometry3::translation(0.2, -0.1, 0.0);
+    let q_true = vec![0.0, 0.3, 0.4, 0.2, 0.6, 0.3];
+    let mut twin_q = q_true.clone();
+    twin_q[3] += std::f64::consts::PI;
+    twin_q[4] = -twin_q[4];
+    twin_q[5] -= std::f64::consts::PI;
+    let twin_of = |key_size_m: f64| {
+        let urdf = keyed_wrist_urdf(key_size_m);
+        let model = RobotModel::from_urdf_str(&urdf, &PackageMap::new()).unwrap();
+        let body = ArticulatedBody::from_model(&model).unwrap();
+        let flange = body
+            .links()
+            .iter()
+            .position(|l| l.name == "flange")
+            .unwrap();
+        let (at_fit, at_twin) = (
+            body.link_poses(&truth, &q_true),
+            body.link_poses(&truth, &twin_q),
+        );
+        let mesh = body.links()[flange].surface.as_ref().unwrap();
+        assert!(mesh.deviation_m(&at_fit[flange], &at_twin[flange]) < 1e-6);
+        let cloud = scan_robot(&body, &truth, &q_true, &RobotScanOptions::default());
+        let fine = voxel_representatives(&cloud, options.voxel_m);
+        let coarse = voxel_representatives(&cloud, options.voxel_m * 3.0);
+        let fit = FitContext {
+            body: &body,
+            scan: Keypoints {
+                coarse: &coarse,
+                fine: &fine,
+            },
+            delta_m: 0.5,
+            global: true,
+            options: &options,
+        };
+        // The state it started from, identical to the fit, is no twin.
+        assert_eq!(fit.twin(&truth, &q_true, &[truth], std::slice::from_ref(&q_true)), None);
+        fit.twin(
+            &truth,
+            &q_true,
+            &[truth, truth],
+            &[q_true.clone(), twin_q.clone()],
+        )
+        .unwrap()
+    };
+    // A 6 mm key: a keypoint or two the twin does not explain.
+    let small = twin_of(0.006);
+    assert!(small.coverage <= small.fit_coverage, "{small:?}");
+    assert!(small.ambiguous, "{small:?}");
+    // A 60 mm block: the scan tells the twin apart.
+    let large = twin_of(0.06);
+    assert!(large.fit_coverage - large.coverage > 10, "{large:?}");
+    assert!(!large.ambiguous, "{large:?}");
+}
