@@ -1,4 +1,4 @@
-//! `ips serve --http 127.0.0.1:0`: the READY line names the page as `http=http://HOST:PORT`
+//! `ips serve --http 0` (a bare port: loopback): the READY line names the page as `http=http://HOST:PORT`
 //! after the REP endpoint, the page answers there, and its state is the service's (the same
 //! process, reached through the REP socket). A bad address is bad input (exit 2).
 
@@ -62,8 +62,9 @@ fn ready_names_the_page_and_the_page_shows_the_services_inspections() {
         "tcp://127.0.0.1:1",
         "--bridge-pub",
         "tcp://127.0.0.1:1",
+        // A bare port: the page listens on loopback only.
         "--http",
-        "127.0.0.1:0",
+        "0",
     ]
     .iter()
     .map(|a| (*a).to_owned())

@@ -46,11 +46,18 @@ pub struct ServeArgs {
     /// (worst case half a sample period off). Without it, only `get` captures.
     #[arg(long, value_name = "INPUT")]
     pub trigger: Option<protocol::DigitalInput>,
-    /// Also serve the operator's page at http://ADDR/ (HOST:PORT; `127.0.0.1:8080` keeps it
-    /// on this machine, `127.0.0.1:0` picks a free port). The page is a client of the REP
-    /// socket and is neither authenticated nor encrypted: bind it to loopback or the cell's
-    /// network only. The READY line then adds `http=http://HOST:PORT`.
-    #[arg(long, value_name = "ADDR")]
+    /// Also serve the operator's page at http://ADDR/: HOST:PORT, or a bare PORT on this
+    /// machine only (127.0.0.1); `--http` alone is 127.0.0.1:8080, `--http 0` picks a free
+    /// port. The page is a client of the REP socket and is neither authenticated nor encrypted:
+    /// bind it to loopback or the cell's network only. The READY line then adds
+    /// `http=http://HOST:PORT`.
+    #[arg(
+        long,
+        value_name = "ADDR",
+        num_args = 0..=1,
+        default_missing_value = "127.0.0.1:8080",
+        value_parser = parse_http_listen
+    )]
     pub http: Option<String>,
 }
 
@@ -76,6 +83,17 @@ impl ServeArgs {
             trigger: self.trigger,
         }
     }
+}
+
+/// `--http`'s address: a bare port means loopback, never every interface.
+fn parse_http_listen(text: &str) -> Result<String, String> {
+    if !text.is_empty() && text.bytes().all(|b| b.is_ascii_digit()) {
+        let port: u16 = text
+            .parse()
+            .map_err(|_| format!("'{text}' is not a port (expected 0-65535)"))?;
+        return Ok(format!("127.0.0.1:{port}"));
+    }
+    Ok(text.to_owned())
 }
 
 /// Serves until a signal; prints `READY rep=ENDPOINT` (and ` http=URL` with `--http`) on stdout

@@ -363,7 +363,10 @@ fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart()
             options: &options,
         };
         // The state it started from, identical to the fit, is no twin.
-        assert_eq!(fit.twin(&truth, &q_true, &[truth], std::slice::from_ref(&q_true)), None);
+        assert_eq!(
+            fit.twin(&truth, &q_true, &[truth], std::slice::from_ref(&q_true)),
+            None
+        );
         fit.twin(
             &truth,
             &q_true,
