@@ -14,6 +14,23 @@ fn example(file: &str) -> PathBuf {
         .join(file)
 }
 
+/// A service on `session` with its journal and data directory in `folder`, no bridge (these
+/// requests never reach it), keeping or dropping the session file's inspections.
+fn config(session: PathBuf, folder: &Path, keep_session_inspections: bool) -> Config {
+    Config {
+        session,
+        journal: folder.join("inspections.journal"),
+        rep: "tcp://127.0.0.1:*".to_owned(),
+        bridge_rep: "tcp://127.0.0.1:1".to_owned(),
+        bridge_pub: "tcp://127.0.0.1:1".to_owned(),
+        max_sample_age_s: 0.1,
+        max_tool_speed_m_s: 0.005,
+        data_dirs: vec![folder.to_path_buf()],
+        keep_session_inspections,
+        trigger: None,
+    }
+}
+
 struct Fixture {
     service: Handle,
     socket: zmq::Socket,
@@ -29,20 +46,7 @@ impl Fixture {
         ));
         let _ = std::fs::remove_dir_all(&folder);
         std::fs::create_dir_all(&folder).unwrap();
-        let service = start(&Config {
-            session: example("session.json"),
-            journal: folder.join("inspections.journal"),
-            rep: "tcp://127.0.0.1:*".to_owned(),
-            // No bridge: these requests never reach it.
-            bridge_rep: "tcp://127.0.0.1:1".to_owned(),
-            bridge_pub: "tcp://127.0.0.1:1".to_owned(),
-            max_sample_age_s: 0.1,
-            max_tool_speed_m_s: 0.005,
-            data_dirs: vec![folder.clone()],
-            keep_session_inspections: true,
-            trigger: None,
-        })
-        .unwrap();
+        let service = start(&config(example("session.json"), &folder, true)).unwrap();
         let context = zmq::Context::new();
         let socket = context.socket(zmq::REQ).unwrap();
         socket.set_linger(0).unwrap();
@@ -232,18 +236,7 @@ fn the_session_files_inspections_are_kept_or_dropped_and_the_start_says_which() 
     ));
     let _ = std::fs::remove_dir_all(&folder);
     std::fs::create_dir_all(&folder).unwrap();
-    let config = |keep: bool| Config {
-        session: example("session.json"),
-        journal: folder.join("inspections.journal"),
-        rep: "tcp://127.0.0.1:*".to_owned(),
-        bridge_rep: "tcp://127.0.0.1:1".to_owned(),
-        bridge_pub: "tcp://127.0.0.1:1".to_owned(),
-        max_sample_age_s: 0.1,
-        max_tool_speed_m_s: 0.005,
-        data_dirs: vec![folder.clone()],
-        keep_session_inspections: keep,
-        trigger: None,
-    };
+    let config = |keep: bool| config(example("session.json"), &folder, keep);
     let count = |service: &Handle| {
         let context = zmq::Context::new();
         let socket = context.socket(zmq::REQ).unwrap();
@@ -351,19 +344,7 @@ fn list_places_the_balls_as_align_does_with_the_sessions_joint_corrections() {
     session["robot"]["joint_offsets"] = json!([0.0, 0.002, 0.0, 0.0, 0.0, 0.0]);
     let path = folder.join("corrected.json");
     std::fs::write(&path, session.to_string()).unwrap();
-    let service = start(&Config {
-        session: path.clone(),
-        journal: folder.join("inspections.journal"),
-        rep: "tcp://127.0.0.1:*".to_owned(),
-        bridge_rep: "tcp://127.0.0.1:1".to_owned(),
-        bridge_pub: "tcp://127.0.0.1:1".to_owned(),
-        max_sample_age_s: 0.1,
-        max_tool_speed_m_s: 0.005,
-        data_dirs: vec![folder.clone()],
-        keep_session_inspections: true,
-        trigger: None,
-    })
-    .unwrap();
+    let service = start(&config(path.clone(), &folder, true)).unwrap();
     let context = zmq::Context::new();
     let socket = context.socket(zmq::REQ).unwrap();
     socket.set_linger(0).unwrap();
