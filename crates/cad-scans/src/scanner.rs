@@ -221,21 +221,7 @@ pub fn scan(
                 continue;
             };
             let direction = scanner.ray(column, row);
-            // The farthest 4-neighbour beyond the edge threshold: the background this beam's
-            // footprint may share.
-            let background = [
-                (column.wrapping_sub(1), row),
-                (column + 1, row),
-                (column, row.wrapping_sub(1)),
-                (column, row + 1),
-            ]
-            .into_iter()
-            .filter(|&(c, r)| c < columns && r < rows)
-            .filter_map(|(c, r)| range_at(c, r))
-            .filter(|&other| other - range > noise.edge_jump_m)
-            .fold(None, |far: Option<f64>, other| {
-                Some(far.map_or(other, |f| f.max(other)))
-            });
+            let background = background_across_edge(&range_at, column, row, columns, rows, noise);
             let (range, origin_kind) = match background {
                 Some(far) if rng.uniform() < noise.mixed_pixel_chance => {
                     // The averaged return: anywhere between the two, weighted by how much of the
@@ -254,6 +240,35 @@ pub fn scan(
     }
     add_spurious_returns(&mut points, scanner, &ranges, noise, rng);
     points
+}
+
+/// The range of the farthest 4-neighbour across a depth edge from the pixel at `column`, `row`,
+/// if any: the background this beam's footprint may share. A jump is an edge when it exceeds
+/// `noise.edge_jump_m` and three times the range step on the opposite side, which is the
+/// surface's own slope: a floor seen at a grazing angle has large steps between rays, but
+/// the same on both sides.
+fn background_across_edge(
+    range_at: &impl Fn(usize, usize) -> Option<f64>,
+    column: usize,
+    row: usize,
+    columns: usize,
+    rows: usize,
+    noise: &ScanNoise,
+) -> Option<f64> {
+    let range = range_at(column, row)?;
+    let at = |c: usize, r: usize| (c < columns && r < rows).then(|| range_at(c, r)).flatten();
+    let (left, right) = (at(column.wrapping_sub(1), row), at(column + 1, row));
+    let (up, down) = (at(column, row.wrapping_sub(1)), at(column, row + 1));
+    [(left, right), (right, left), (up, down), (down, up)]
+        .into_iter()
+        .filter_map(|(side, opposite)| {
+            let jump = side? - range;
+            let slope = opposite.map_or(0.0, |o| (range - o).abs());
+            (jump > noise.edge_jump_m && jump > 3.0 * slope).then_some(side?)
+        })
+        .fold(None, |far: Option<f64>, other| {
+            Some(far.map_or(other, |f| f.max(other)))
+        })
 }
 
 /// Tops the outliers up to `noise.outlier_fraction` of all points with returns at a uniform

@@ -155,15 +155,18 @@ fn report(
         })
         .collect();
     let rows = rows(&scored, methods);
-    if args.json {
-        let document = serde_json::json!({
-            "seed": args.seed,
-            "scans_per_delta": args.scans,
-            "rows": rows,
-            "trials": records(&scored, methods),
-        });
-        serde_json::to_string(&document).map_err(|e| e.to_string())
-    } else {
-        Ok(markdown(&rows))
+    let document = serde_json::json!({
+        "seed": args.seed,
+        "scans_per_delta": args.scans,
+        "rows": rows,
+        "trials": records(&scored, methods),
+    });
+    let json = serde_json::to_string(&document).map_err(|e| e.to_string())?;
+    let table = markdown(&rows);
+    // Both forms beside the scenes, so a long run's table survives a lost terminal.
+    for (name, text) in [("results.json", &json), ("table.md", &table)] {
+        let path = args.out.join(name);
+        std::fs::write(&path, text).map_err(|e| format!("'{}': {e}", path.display()))?;
     }
+    Ok(if args.json { json } else { table })
 }
