@@ -120,10 +120,25 @@ fn run(args: &Args) -> Result<String, String> {
     let mut methods = vec![IPS.to_owned()];
     let mut outcomes: Vec<Vec<Option<cad_scans::trials::Outcome>>> = Vec::new();
     for (index, trial) in trials.iter().enumerate() {
-        outcomes.push(vec![Some(run_ips(trial))]);
-        eprint!("\rcad-scans: ips aligned {}/{}", index + 1, trials.len());
+        let outcome = run_ips(trial);
+        // One line a trial: a long run's results can be read before its table.
+        eprintln!(
+            "cad-scans: ips {}/{}: {} at {:.0} mm: {:.2} mm off in {:.2} s{}{}",
+            index + 1,
+            trials.len(),
+            trial.part,
+            trial.delta_m * 1e3,
+            outcome.error_m(trial) * 1e3,
+            outcome.time_s,
+            if outcome.ambiguous { ", ambiguous" } else { "" },
+            if outcome.refused.is_some() {
+                ", refused"
+            } else {
+                ""
+            },
+        );
+        outcomes.push(vec![Some(outcome)]);
     }
-    eprintln!();
     if !args.no_peers {
         let manifest = args.out.join("manifest.json");
         write_manifest(&manifest, &trials).map_err(|e| format!("'{}': {e}", manifest.display()))?;
