@@ -1,0 +1,19 @@
+//! Scanner clouds of real CAD, made independently of the project's own scan generator, and the
+//! trials that align them with ips and with peers (Open3D, small_gicp) in the same run
+//! (issue 20, docs/cad-scan-trials.md).
+//!
+//! - [`scanner`]: a ray-casting range scanner over a whole scene (occlusion, range noise along
+//!   the ray, mixed pixels at depth edges, spurious returns);
+//! - [`scenes`]: the parts (shipped meshes, the ABB IRB 1600's from outside the repository) and
+//!   the seeded scenes: a part standing or lying on a floor beside a box, 2-3 scanners;
+//! - [`files`], [`trials`], [`peers`], [`table`]: the corpus written to files, ips and the peers
+//!   run on it, every pose scored by the thesis's pose distance, one table.
+
+pub mod files;
+pub mod peers;
+pub mod scanner;
+pub mod scenes;
+pub mod table;
+pub mod trials;
+
+pub use scanner::SceneError;

@@ -1,0 +1,132 @@
+//! ips on scans of real CAD (the meshes shipped in `meshes/`, xArm7 and SO-ARM100 links) at each
+//! of the deltas: three seeded scenes per delta, the parts taken in turn, exactly as the
+//! `cad-scans` runner makes them (`cad-scans --no-abb --scans 3 --seed 20 --no-peers` prints the
+//! same trials). The counts asserted are what ips achieved when the test was written; they are
+//! a floor for regressions, not a target, and they are low: see docs/cad-scan-trials.md.
+#![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use cad_scans::scanner::ScanNoise;
+use cad_scans::scenes::shipped_parts;
+use cad_scans::trials::{CorpusOptions, Outcome, Trial, prepare_trials, run_ips};
+
+const DELTAS_MM: [f64; 5] = [50.0, 100.0, 200.0, 500.0, 1000.0];
+
+/// The runner's corpus with its defaults' seed, three scans per delta: made once per test binary.
+fn corpus() -> &'static [Trial] {
+    static TRIALS: OnceLock<Vec<Trial>> = OnceLock::new();
+    TRIALS.get_or_init(|| {
+        let options = CorpusOptions {
+            deltas_m: DELTAS_MM.iter().map(|d| d * 1e-3).collect(),
+            scans_per_delta: 3,
+            seed: 20,
+            noise: ScanNoise::default(),
+            out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("cad-scans-recovery"),
+        };
+        prepare_trials(&shipped_parts().unwrap(), &options, |_, _| {}).unwrap()
+    })
+}
+
+fn trials_at(delta_mm: f64) -> Vec<(Trial, Outcome)> {
+    corpus()
+        .iter()
+        .filter(|t| (t.delta_m * 1e3 - delta_mm).abs() < 1e-9)
+        .map(|trial| (trial.clone(), run_ips(trial)))
+        .collect()
+}
+
+fn successes(results: &[(Trial, Outcome)]) -> usize {
+    results.iter().filter(|(t, o)| o.succeeded(t)).count()
+}
+
+fn describe(results: &[(Trial, Outcome)]) -> String {
+    results
+        .iter()
+        .map(|(t, o)| {
+            format!(
+                "{} {:?}: {:.2} mm{}{}",
+                t.part,
+                t.posture,
+                o.error_m(t) * 1e3,
+                if o.ambiguous { " ambiguous" } else { "" },
+                o.refused
+                    .as_deref()
+                    .map_or(String::new(), |r| format!(" refused: {r}"))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+#[test]
+fn at_50_mm_every_scan_is_recovered_and_none_is_called_ambiguous() {
+    let results = trials_at(50.0);
+    assert_eq!(successes(&results), 3, "{}", describe(&results));
+    // The counterpart of the cylinder's test (refusals.rs): a part that is not symmetric is
+    // not reported ambiguous once found.
+    assert!(
+        results.iter().all(|(_, o)| !o.ambiguous),
+        "{}",
+        describe(&results)
+    );
+}
+
+#[test]
+fn at_100_mm_one_scan_in_three_is_recovered() {
+    // Measured: 1/3. An xArm7 link ends 1.1 mm off (a near miss: the scan's noise and mixed
+    // pixels hold the last millimetre), an SO-ARM100 upper arm 245 mm off, flagged ambiguous.
+    let results = trials_at(100.0);
+    assert!(successes(&results) >= 1, "{}", describe(&results));
+    assert_no_confident_wrong_pose(&results, 0.002);
+}
+
+#[test]
+fn at_200_mm_no_scan_is_recovered_but_every_miss_is_reported_ambiguous() {
+    // Measured: 0/3, each 300-530 mm off and each flagged ambiguous by the exploration's
+    // uniqueness test. The honest floor is 0 recovered; what this pins is that ips does not
+    // claim a wrong pose is unique.
+    let results = trials_at(200.0);
+    assert_no_confident_wrong_pose(&results, 0.002);
+}
+
+/// Every scan is recovered, lands within `near_m`, or is reported ambiguous or refused.
+fn assert_no_confident_wrong_pose(results: &[(Trial, Outcome)], near_m: f64) {
+    for (trial, outcome) in results {
+        let flagged = outcome.ambiguous || outcome.refused.is_some();
+        assert!(
+            outcome.error_m(trial) < near_m || flagged,
+            "a confident wrong pose: {}",
+            describe(std::slice::from_ref(&(trial.clone(), outcome.clone())))
+        );
+    }
+}
+
+// 500 and 1000 mm: a single alignment takes 35-120 s in the test profile (the exploration over
+// a cut-off box that takes in the whole floor), too long for CI; `cargo test -p cad-scans
+// --test recovery -- --ignored` runs them.
+#[test]
+#[ignore = "minutes: ips's exploration at 0.5 m takes 35-60 s a scan"]
+fn at_500_mm_no_scan_is_recovered() {
+    // Measured: 0/3, all flagged ambiguous (300-410 mm off).
+    let results = trials_at(500.0);
+    assert_no_confident_wrong_pose(&results, 0.002);
+}
+
+#[test]
+#[ignore = "minutes: ips's exploration at 1 m takes up to 2 min a scan"]
+fn at_1000_mm_no_scan_is_recovered_and_a_small_part_far_off_is_refused() {
+    // Measured: 0/3. The SO-ARM100 lower arm's start lies 0.5 m below the floor: every scan
+    // point near it is nearest to one of its edges, which the correspondence rule drops, and
+    // ips refuses ("only 1 cloud points lie within delta"). An xArm7 link2 ends 370 mm off and
+    // is NOT flagged: a confident wrong pose, the one such case in these 15 trials.
+    let results = trials_at(1000.0);
+    assert_eq!(successes(&results), 0, "{}", describe(&results));
+    assert_eq!(
+        results.iter().filter(|(_, o)| o.refused.is_some()).count(),
+        1,
+        "{}",
+        describe(&results)
+    );
+}
