@@ -373,6 +373,29 @@ impl Mesh {
         Some(self.surface_point(query, triangle, &from_glam(projection.point), feature))
     }
 
+    /// [`Mesh::closest_point_within`], approximate by at most a factor `slack` (>= 1): the point
+    /// found is no farther than `slack` times the closest one. For searches whose queries lie
+    /// mostly far off the part (a coarse exploration in a band of half a metre), where an exact
+    /// answer must open every node the sphere through the best triangle meets. `hint` is the
+    /// answer to a nearby query (the same point at the previous step of a run): with a slack,
+    /// a far query near its hint's triangle is answered without opening the tree at all.
+    pub fn closest_point_within_slack(
+        &self,
+        query: &Point3<f64>,
+        max_distance_m: f64,
+        slack: f64,
+        hint: Option<u32>,
+    ) -> Option<SurfacePoint> {
+        let found = self.facing_tree().closest_within_slack(
+            query,
+            None,
+            max_distance_m,
+            hint,
+            slack.max(1.0),
+        )?;
+        Some(self.surface_point(query, found.triangle, &found.point.coords, found.feature))
+    }
+
     /// The closest surface point to `query` among the triangles whose unit normal lies within
     /// `cone_rad` of `facing` (the faces a probe approaching along `-facing` could touch), or
     /// `None` when the part has no such triangle. One descent of a tree that bounds normals as
@@ -618,6 +641,36 @@ mod tests {
         assert!((corner.normal - Vector3::new(1.0, 1.0, 1.0).normalize()).norm() < 1e-9);
         assert!(corner.signed_distance > 0.0);
         assert!((mesh.radius_m() - 0.1 * 3f64.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn slack_queries_stay_within_their_factor_with_or_without_a_hint() {
+        let mesh = Mesh::cuboid([0.3, 0.1, 0.05]).unwrap();
+        let mut rng = crate::rng::SplitMix64::new(5);
+        for _ in 0..500 {
+            let query = Point3::from(Vector3::from_fn(|_, _| 1.6 * rng.uniform() - 0.8));
+            let exact = mesh.closest_point(&query).signed_distance.abs();
+            // A hint from another query, as a run's previous step gives.
+            let hint = mesh
+                .closest_point(&(query + Vector3::new(0.05, 0.0, 0.0)))
+                .triangle;
+            for hint in [None, Some(hint)] {
+                let found = mesh
+                    .closest_point_within_slack(&query, 2.0, 1.5, hint)
+                    .unwrap();
+                let distance = (found.point - query).norm();
+                assert!(
+                    distance <= 1.5 * exact + 1e-12,
+                    "{distance} against {exact}"
+                );
+                assert!((found.signed_distance.abs() - distance).abs() < 1e-12);
+            }
+            // Beyond the limit there is nothing to find.
+            assert!(
+                mesh.closest_point_within_slack(&query, 0.5 * exact, 1.5, None)
+                    .is_none()
+            );
+        }
     }
 
     #[test]

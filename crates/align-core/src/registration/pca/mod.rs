@@ -17,8 +17,11 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
 use rayon::prelude::*;
 
+mod exploration;
+
+use self::exploration::{EXPLORATION_SLACK, Exploring, detected_starts, explore, explore_turns};
+pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use super::convergence::{StopCriterion, pose_distance};
-use super::psa::spread_rotations;
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
 use crate::geometry::{Mesh, PrincipalSpread};
@@ -248,7 +251,8 @@ pub fn align_cloud(
         base_from_part_start,
         delta0_m,
         (&bounds.0, &bounds.1),
-        options.parallel,
+        Lookup::exact(options.parallel),
+        &mut [],
     );
     if first.len() < 6 {
         return Err(PcaError::TooFewPoints {
@@ -262,7 +266,19 @@ pub fn align_cloud(
     let mut schedule_from = delta0_m;
     let mut explored_ends: Vec<(f64, Isometry3<f64>)> = Vec::new();
     if options.starts > 0 {
-        let (scored, explored) = explore(mesh, cloud, base_from_part_start, delta0_m, options);
+        let detected = detected_starts(mesh, cloud, base_from_part_start, delta0_m);
+        let exploring = Exploring {
+            detected: &detected,
+            slack: EXPLORATION_SLACK,
+        };
+        let (scored, explored) = explore(
+            mesh,
+            cloud,
+            base_from_part_start,
+            delta0_m,
+            options,
+            exploring,
+        );
         start = scored.first().map_or(start, |(_, pose)| *pose);
         explored_ends = scored;
         starts += explored;
@@ -270,7 +286,7 @@ pub fn align_cloud(
         // again would only let the clutter back in.
         schedule_from = delta0_m.min(3.0 * options.delta_min_m);
     }
-    let mut run = run_schedule(mesh, &keypoints, &start, schedule_from, options);
+    let mut run = run_schedule(mesh, &keypoints, &start, schedule_from, options, 1.0);
     let mut uniqueness_found = None;
     if options.starts > 0 {
         // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
@@ -279,13 +295,24 @@ pub fn align_cloud(
         // fills nearly the same space: a band of half the part's radius keeps the clutter out.
         let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
         let band = delta0_m.min(0.5 * mesh.radius_m());
-        let (around, _) = explore_turns(mesh, cloud, &run.pose, max_angle, band, options);
+        let (around, _) = explore_turns(
+            mesh,
+            cloud,
+            &run.pose,
+            max_angle,
+            band,
+            options,
+            // Exact: with the slack these runs found the twin of a symmetric box in no start
+            // (crates/align-core/tests/pca.rs, before answers near the surface were made
+            // exact), and their band is narrow, so cheap anyway.
+            Exploring::EXACT,
+        );
         let (coarse, score_band) = exploration_scoring(cloud, options);
         let found_score = consensus(mesh, &coarse, &run.pose, score_band);
         if let Some((better_score, better)) = around.first()
             && *better_score > found_score + 2.0 * found_score.max(0.0).sqrt()
         {
-            let again = run_schedule(mesh, &keypoints, better, schedule_from, options);
+            let again = run_schedule(mesh, &keypoints, better, schedule_from, options, 1.0);
             if consensus(mesh, &coarse, &again.pose, score_band) > found_score {
                 run = again;
             }
@@ -299,7 +326,8 @@ pub fn align_cloud(
         &run.pose,
         run.delta,
         (&bounds.0, &bounds.1),
-        options.parallel,
+        Lookup::exact(options.parallel),
+        &mut [],
     );
     let (sum, max) = final_matches.iter().fold((0.0, 0.0f64), |(sum, max), m| {
         (sum + m.distance * m.distance, max.max(m.distance))
@@ -378,8 +406,18 @@ fn run_schedule(
     start: &Isometry3<f64>,
     delta0_m: f64,
     options: &PcaOptions,
+    slack: f64,
 ) -> ScheduleRun {
     let (lower, upper) = mesh.bounds();
+    let lookup = Lookup {
+        parallel: options.parallel,
+        slack,
+    };
+    let mut hints = if slack > 1.0 {
+        vec![NO_HINT; keypoints.len()]
+    } else {
+        Vec::new()
+    };
     let radius_m = mesh.radius_m();
     let mut pose = *start;
     let mut stop = StopCriterion::new(options.window, options.tolerance_m, radius_m);
@@ -402,7 +440,8 @@ fn run_schedule(
             &pose,
             delta,
             (&lower, &upper),
-            options.parallel,
+            lookup,
+            &mut hints,
         );
         if matches.len() < 6 {
             break;
@@ -467,209 +506,47 @@ fn consensus(mesh: &Mesh, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, band
         .sum()
 }
 
-/// Global exploration for large deltas: short runs on coarse keypoints from the start and from
-/// the start turned about the part's centroid by rotations spread over the ball the user's delta
-/// allows; returns the ends of the runs with their consensus, best first, and how many runs
-/// were made.
-fn explore(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    start: &Isometry3<f64>,
-    delta0_m: f64,
-    options: &PcaOptions,
-) -> (Vec<(f64, Isometry3<f64>)>, usize) {
-    let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
-    explore_turns(mesh, cloud, start, max_angle, delta0_m, options)
-}
-
-/// The runs of [`explore`] from `start` turned by up to `max_angle` (rad), each from a band of
-/// `delta0_m`.
-fn explore_turns(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    start: &Isometry3<f64>,
-    max_angle: f64,
-    delta0_m: f64,
-    options: &PcaOptions,
-) -> (Vec<(f64, Isometry3<f64>)>, usize) {
-    let (coarse, band) = exploration_scoring(cloud, options);
-    let short = PcaOptions {
-        max_iterations: 40,
-        window: 3,
-        tolerance_m: 1e-5,
-        ..options.clone()
-    };
-    let centre = mesh.centroid();
-    let about_centre = Isometry3::translation(centre.x, centre.y, centre.z);
-    let mut candidates = vec![*start];
-    // Only orientations within the rotation delta allows (with margin) are tried: scaling a
-    // spread set into that ball was tried and is worse, since the consensus score then prefers
-    // poses that rest a large face on the floor plane.
-    for rotation in spread_rotations(options.starts) {
-        if rotation.angle() <= max_angle {
-            candidates.push(
-                start
-                    * about_centre
-                    * Isometry3::from_parts(Translation3::identity(), rotation)
-                    * about_centre.inverse(),
-            );
-        }
-    }
-    // The runs share the threads; a run alone (a delta too small for any turn) takes them
-    // itself, since it is then all the exploration does.
-    let run_options = PcaOptions {
-        parallel: options.parallel && candidates.len() < rayon::current_num_threads(),
-        ..short.clone()
-    };
-    let mut scored: Vec<(f64, Isometry3<f64>)> = candidates
-        .par_iter()
-        .map(|candidate| {
-            let run = run_schedule(mesh, &coarse, candidate, delta0_m, &run_options);
-            (consensus(mesh, &coarse, &run.pose, band), run.pose)
-        })
-        .collect();
-    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-    (scored, candidates.len() - 1)
-}
-
-/// Starts spread in translation that [`pose_candidates_spread`] screens, at most.
-const SPREAD_STARTS: usize = 512;
-
-/// [`pose_candidates`] for a start that may be off by more than the part is big (`bound_m`, the
-/// largest distance of the part's origin from where the start puts it, beyond its radius). A
-/// run from the start in a band that wide is pulled by everything the band holds (a neighbouring
-/// object, the rest of a robot) and settles where the part is not: on a boxy robot base the best
-/// such end scored 600-700 where the true pose scores 930-960 (exploratory runs). The runs start
-/// instead from the start moved to the points of a cubic grid within `bound_m` (spacing half the
-/// part's radius, coarser where that would make more than [`SPREAD_STARTS`]), each in a band of
-/// one spacing: a short run on sparse keypoints screens them, and the best `4 count` distinct
-/// ends run again as the exploration's runs do.
-pub fn pose_candidates_spread(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    start: &Isometry3<f64>,
-    bound_m: f64,
-    options: &PcaOptions,
-    count: usize,
-    distinct_m: f64,
-) -> Vec<Isometry3<f64>> {
-    let radius_m = mesh.radius_m();
-    // A ball of radius bound holds about 4.19 (bound / spacing)^3 grid points.
-    let crowded_m = bound_m * (4.19 / SPREAD_STARTS as f64).cbrt();
-    let spacing_m = (radius_m / 2.0).max(crowded_m);
-    if !(spacing_m.is_finite() && spacing_m > 0.0) {
-        return Vec::new();
-    }
-    let steps = (bound_m / spacing_m).floor() as i32;
-    let mut starts = Vec::new();
-    for i in -steps..=steps {
-        for j in -steps..=steps {
-            for k in -steps..=steps {
-                let offset = Vector3::new(f64::from(i), f64::from(j), f64::from(k)) * spacing_m;
-                if offset.norm() <= bound_m {
-                    starts.push(Isometry3::from_parts(
-                        Translation3::from(start.translation.vector + offset),
-                        start.rotation,
-                    ));
-                }
-            }
-        }
-    }
-    // The screening's keypoints: a sixth of the part's radius apart (some hundred on its
-    // surface), between the exploration's spacing and twice it.
-    let sparse_m = (radius_m / 6.0)
-        .max(options.voxel_m * 3.0)
-        .min(options.voxel_m * 6.0);
-    let sparse = voxel_representatives(cloud, sparse_m);
-    let keypoints = voxel_representatives(cloud, options.voxel_m * 3.0);
-    let band = (options.voxel_m * 2.0).max(options.delta_min_m * 0.3);
-    let screen = PcaOptions {
-        schedule_iterations: 10,
-        max_iterations: 10,
-        window: 3,
-        tolerance_m: 1e-4,
-        parallel: false,
-        ..options.clone()
-    };
-    let mut screened: Vec<(f64, Isometry3<f64>)> = starts
-        .par_iter()
-        .map(|start| {
-            let run = run_schedule(mesh, &sparse, start, spacing_m, &screen);
-            (consensus(mesh, &sparse, &run.pose, 2.0 * band), run.pose)
-        })
-        .collect();
-    screened.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let finalists = distinct_poses(screened, 4 * count, radius_m, distinct_m);
-    let short = PcaOptions {
-        max_iterations: 40,
-        window: 3,
-        tolerance_m: 1e-5,
-        parallel: false,
-        ..options.clone()
-    };
-    let mut scored: Vec<(f64, Isometry3<f64>)> = finalists
-        .par_iter()
-        .map(|pose| {
-            let run = run_schedule(mesh, &keypoints, pose, spacing_m / 2.0, &short);
-            (consensus(mesh, &keypoints, &run.pose, band), run.pose)
-        })
-        .collect();
-    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-    distinct_poses(scored, count, radius_m, distinct_m)
-}
-
-/// The poses of `scored` (best first) no two within `distinct_m` (thesis pose distance), at most
-/// `count`.
-fn distinct_poses(
-    scored: Vec<(f64, Isometry3<f64>)>,
-    count: usize,
-    radius_m: f64,
-    distinct_m: f64,
-) -> Vec<Isometry3<f64>> {
-    let mut kept: Vec<Isometry3<f64>> = Vec::new();
-    for (_, pose) in scored {
-        if kept.len() == count {
-            break;
-        }
-        if kept
-            .iter()
-            .all(|k| pose_distance(k, &pose, radius_m) > distinct_m)
-        {
-            kept.push(pose);
-        }
-    }
-    kept
-}
-
-/// Rigid poses of `mesh` in `cloud` within what `delta0_m` allows from `start`, best consensus
-/// first, at most `count` of them and no two within `distinct_m` of each other (thesis pose
-/// distance): the ends of the short runs of the exploration, for a caller that checks several.
-pub fn pose_candidates(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    start: &Isometry3<f64>,
-    delta0_m: f64,
-    options: &PcaOptions,
-    count: usize,
-    distinct_m: f64,
-) -> Vec<Isometry3<f64>> {
-    let (scored, _) = explore(mesh, cloud, start, delta0_m, options);
-    distinct_poses(scored, count, mesh.radius_m(), distinct_m)
-}
-
 const EDGE_REJECTION_M: f64 = 1e-3;
 
+/// How [`correspond`] finds each keypoint's surface point.
+#[derive(Debug, Clone, Copy)]
+struct Lookup {
+    /// Parallel over the keypoints (rayon).
+    parallel: bool,
+    /// 1: the closest surface point; more: one up to that factor farther (see
+    /// [`EXPLORATION_SLACK`]).
+    slack: f64,
+}
+
+impl Lookup {
+    fn exact(parallel: bool) -> Self {
+        Self {
+            parallel,
+            slack: 1.0,
+        }
+    }
+}
+
+/// A slack lookup's answers nearer the surface than this are made exact.
+const EXACT_WITHIN_M: f64 = 0.02;
+
+/// No triangle remembered for a keypoint yet.
+const NO_HINT: u32 = u32::MAX;
+
 /// Cut-off and measure filters, then the surface correspondence and weight of each keypoint.
+/// `hints` (one per keypoint, or empty) remember each keypoint's triangle between the steps of
+/// an approximate run, whose far queries they answer in one projection.
 fn correspond(
     mesh: &Mesh,
     keypoints: &[Point3<f64>],
     pose: &Isometry3<f64>,
     delta: f64,
     (lower, upper): (&Point3<f64>, &Point3<f64>),
-    parallel: bool,
+    lookup: Lookup,
+    hints: &mut [u32],
 ) -> Vec<Match> {
     let part_from_base = pose.inverse();
-    let one = |point: &Point3<f64>| -> Option<Match> {
+    let one = |point: &Point3<f64>, hint: Option<&mut u32>| -> Option<Match> {
         let in_part = part_from_base * point;
         let inside_box = (0..3).all(|axis| {
             in_part[axis] >= lower[axis] - delta && in_part[axis] <= upper[axis] + delta
@@ -677,7 +554,25 @@ fn correspond(
         if !inside_box {
             return None;
         }
-        let closest = mesh.closest_point_within(&in_part, delta)?;
+        let closest = if lookup.slack > 1.0 {
+            let remembered = hint.as_ref().map(|h| **h).filter(|&h| h != NO_HINT);
+            let found =
+                mesh.closest_point_within_slack(&in_part, delta, lookup.slack, remembered)?;
+            if let Some(hint) = hint {
+                *hint = found.triangle;
+            }
+            // Near the surface the exact answer, bounded by the approximate one (a short
+            // search): the points that hold the part in place must pull along the right
+            // normals, or the runs end short of their optimum and score below it.
+            if found.signed_distance.abs() <= EXACT_WITHIN_M {
+                mesh.closest_point_within(&in_part, found.signed_distance.abs() + 1e-9)
+                    .unwrap_or(found)
+            } else {
+                found
+            }
+        } else {
+            mesh.closest_point_within(&in_part, delta)?
+        };
         let distance = closest.signed_distance.abs();
         // A point whose nearest surface is an edge or corner, more than a millimetre off, lies
         // beyond the part: typically the floor or a fixture meeting it. Such points only drag
@@ -694,10 +589,25 @@ fn correspond(
             weight,
         })
     };
-    if parallel {
-        keypoints.par_iter().filter_map(one).collect()
-    } else {
-        keypoints.iter().filter_map(one).collect()
+    match (lookup.parallel, hints.len() == keypoints.len()) {
+        (true, true) => keypoints
+            .par_iter()
+            .zip(hints.par_iter_mut())
+            .filter_map(|(point, hint)| one(point, Some(hint)))
+            .collect(),
+        (true, false) => keypoints
+            .par_iter()
+            .filter_map(|point| one(point, None))
+            .collect(),
+        (false, true) => keypoints
+            .iter()
+            .zip(hints.iter_mut())
+            .filter_map(|(point, hint)| one(point, Some(hint)))
+            .collect(),
+        (false, false) => keypoints
+            .iter()
+            .filter_map(|point| one(point, None))
+            .collect(),
     }
 }
 

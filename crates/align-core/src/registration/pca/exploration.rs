@@ -1,0 +1,291 @@
+//! The global part of Point Cloud Alignment: short runs from many starts (turns of the start,
+//! poses a point-pair-feature detection finds, translations of the start), each scored by how
+//! much of the scan it explains, for starts too far from the truth for one run.
+
+use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use rayon::prelude::*;
+
+use super::{PcaOptions, consensus, exploration_scoring, run_schedule};
+use crate::geometry::Mesh;
+use crate::registration::convergence::pose_distance;
+use crate::registration::ppf::{PpfOptions, ppf_poses};
+use crate::registration::psa::spread_rotations;
+use crate::registration::sampling::voxel_representatives;
+
+/// The exploration's short runs may match a keypoint to a surface point up to this factor
+/// farther than the closest. Their band is as wide as the user's delta (half a metre and more),
+/// so most of their keypoints are clutter far off the part, where an exact answer opens every
+/// node of the mesh's tree that the sphere through the best triangle meets: exact, those
+/// queries were 95% of a 500 mm alignment's time.
+pub(super) const EXPLORATION_SLACK: f64 = 1.5;
+
+/// Global exploration for large deltas: short runs on coarse keypoints from the start and from
+/// the start turned about the part's centroid by rotations spread over the ball the user's delta
+/// allows; returns the ends of the runs with their consensus, best first, and how many runs
+/// were made.
+pub(super) fn explore(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+    exploring: Exploring,
+) -> (Vec<(f64, Isometry3<f64>)>, usize) {
+    let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
+    explore_turns(mesh, cloud, start, max_angle, delta0_m, options, exploring)
+}
+
+/// What an exploration adds to its turns of the start, and how exactly its runs match.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Exploring<'a> {
+    /// More starts (the detection's poses).
+    pub(super) detected: &'a [Isometry3<f64>],
+    /// 1, or [`EXPLORATION_SLACK`] (see [`correspond`]).
+    pub(super) slack: f64,
+}
+
+impl Exploring<'_> {
+    /// Turns only, matched exactly: the runs around a found pose, and the robot fit's base
+    /// candidates, whose tables (docs/articulated-trials.md) were measured so.
+    pub(super) const EXACT: Exploring<'static> = Exploring {
+        detected: &[],
+        slack: 1.0,
+    };
+}
+
+/// The exploration also runs from poses a point-pair-feature detection finds, once delta is
+/// this fraction of the part's radius or more: turns of the start alone leave the translation
+/// to the runs, which a band that wide pulls into the clutter.
+const DETECTION_DELTA_PER_RADIUS: f64 = 0.5;
+
+/// The detection's model samples, about, at most.
+const DETECTION_MODEL_SAMPLES: f64 = 1500.0;
+
+/// Detected poses tried, at most.
+const DETECTED_STARTS: usize = 16;
+
+/// Poses of the part that the point pair features find in the cloud within what delta allows
+/// from the start (its origin within the translations and turns of the thesis's scheme), for a
+/// delta large enough to need them; none otherwise.
+pub(super) fn detected_starts(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+) -> Vec<Isometry3<f64>> {
+    let radius_m = mesh.radius_m();
+    if delta0_m < DETECTION_DELTA_PER_RADIUS * radius_m {
+        return Vec::new();
+    }
+    let max_angle = (1.2 * delta0_m / radius_m).min(std::f64::consts::PI);
+    // A turn about the centroid moves the origin by up to twice its distance from it.
+    let reach_m = 1.2 * delta0_m + 2.0 * mesh.centroid().coords.norm();
+    // A tenth of the radius resolves a small part's shape; on a large one the sample count is
+    // capped instead, since the model's table grows with its square and the voting with it.
+    let area_m2: f64 = (0..mesh.num_triangles() as u32)
+        .map(|t| mesh.triangle_area(t))
+        .sum();
+    let options = PpfOptions {
+        step_m: (radius_m / 10.0)
+            .clamp(0.006, 0.015)
+            .max((area_m2 / DETECTION_MODEL_SAMPLES).sqrt()),
+        ..PpfOptions::default()
+    };
+    ppf_poses(
+        mesh,
+        cloud,
+        &(start * Point3::origin()),
+        reach_m,
+        &options,
+        DETECTED_STARTS,
+        0.3,
+    )
+    .into_iter()
+    .map(|pose| pose.world_from_model)
+    .filter(|pose| pose.rotation.angle_to(&start.rotation) <= max_angle)
+    .collect()
+}
+
+/// The runs of [`explore`] from `start` turned by up to `max_angle` (rad), each from a band of
+/// `delta0_m`.
+pub(super) fn explore_turns(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    max_angle: f64,
+    delta0_m: f64,
+    options: &PcaOptions,
+    exploring: Exploring,
+) -> (Vec<(f64, Isometry3<f64>)>, usize) {
+    let (coarse, band) = exploration_scoring(cloud, options);
+    let short = PcaOptions {
+        max_iterations: 40,
+        window: 3,
+        tolerance_m: 1e-5,
+        ..options.clone()
+    };
+    let centre = mesh.centroid();
+    let about_centre = Isometry3::translation(centre.x, centre.y, centre.z);
+    let mut candidates = vec![*start];
+    // Only orientations within the rotation delta allows (with margin) are tried: scaling a
+    // spread set into that ball was tried and is worse, since the consensus score then prefers
+    // poses that rest a large face on the floor plane.
+    for rotation in spread_rotations(options.starts) {
+        if rotation.angle() <= max_angle {
+            candidates.push(
+                start
+                    * about_centre
+                    * Isometry3::from_parts(Translation3::identity(), rotation)
+                    * about_centre.inverse(),
+            );
+        }
+    }
+    candidates.extend_from_slice(exploring.detected);
+    // The runs share the threads; a run alone (a delta too small for any turn) takes them
+    // itself, since it is then all the exploration does.
+    let run_options = PcaOptions {
+        parallel: options.parallel && candidates.len() < rayon::current_num_threads(),
+        ..short.clone()
+    };
+    let mut scored: Vec<(f64, Isometry3<f64>)> = candidates
+        .par_iter()
+        .map(|candidate| {
+            let run = run_schedule(
+                mesh,
+                &coarse,
+                candidate,
+                delta0_m,
+                &run_options,
+                exploring.slack,
+            );
+            (consensus(mesh, &coarse, &run.pose, band), run.pose)
+        })
+        .collect();
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    (scored, candidates.len() - 1)
+}
+
+/// Starts spread in translation that [`pose_candidates_spread`] screens, at most.
+const SPREAD_STARTS: usize = 512;
+
+/// [`pose_candidates`] for a start that may be off by more than the part is big (`bound_m`, the
+/// largest distance of the part's origin from where the start puts it, beyond its radius). A
+/// run from the start in a band that wide is pulled by everything the band holds (a neighbouring
+/// object, the rest of a robot) and settles where the part is not: on a boxy robot base the best
+/// such end scored 600-700 where the true pose scores 930-960 (exploratory runs). The runs start
+/// instead from the start moved to the points of a cubic grid within `bound_m` (spacing half the
+/// part's radius, coarser where that would make more than [`SPREAD_STARTS`]), each in a band of
+/// one spacing: a short run on sparse keypoints screens them, and the best `4 count` distinct
+/// ends run again as the exploration's runs do.
+pub fn pose_candidates_spread(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    bound_m: f64,
+    options: &PcaOptions,
+    count: usize,
+    distinct_m: f64,
+) -> Vec<Isometry3<f64>> {
+    let radius_m = mesh.radius_m();
+    // A ball of radius bound holds about 4.19 (bound / spacing)^3 grid points.
+    let crowded_m = bound_m * (4.19 / SPREAD_STARTS as f64).cbrt();
+    let spacing_m = (radius_m / 2.0).max(crowded_m);
+    if !(spacing_m.is_finite() && spacing_m > 0.0) {
+        return Vec::new();
+    }
+    let steps = (bound_m / spacing_m).floor() as i32;
+    let mut starts = Vec::new();
+    for i in -steps..=steps {
+        for j in -steps..=steps {
+            for k in -steps..=steps {
+                let offset = Vector3::new(f64::from(i), f64::from(j), f64::from(k)) * spacing_m;
+                if offset.norm() <= bound_m {
+                    starts.push(Isometry3::from_parts(
+                        Translation3::from(start.translation.vector + offset),
+                        start.rotation,
+                    ));
+                }
+            }
+        }
+    }
+    // The screening's keypoints: a sixth of the part's radius apart (some hundred on its
+    // surface), between the exploration's spacing and twice it.
+    let sparse_m = (radius_m / 6.0)
+        .max(options.voxel_m * 3.0)
+        .min(options.voxel_m * 6.0);
+    let sparse = voxel_representatives(cloud, sparse_m);
+    let keypoints = voxel_representatives(cloud, options.voxel_m * 3.0);
+    let band = (options.voxel_m * 2.0).max(options.delta_min_m * 0.3);
+    let screen = PcaOptions {
+        schedule_iterations: 10,
+        max_iterations: 10,
+        window: 3,
+        tolerance_m: 1e-4,
+        parallel: false,
+        ..options.clone()
+    };
+    let mut screened: Vec<(f64, Isometry3<f64>)> = starts
+        .par_iter()
+        .map(|start| {
+            let run = run_schedule(mesh, &sparse, start, spacing_m, &screen, 1.0);
+            (consensus(mesh, &sparse, &run.pose, 2.0 * band), run.pose)
+        })
+        .collect();
+    screened.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let finalists = distinct_poses(screened, 4 * count, radius_m, distinct_m);
+    let short = PcaOptions {
+        max_iterations: 40,
+        window: 3,
+        tolerance_m: 1e-5,
+        parallel: false,
+        ..options.clone()
+    };
+    let mut scored: Vec<(f64, Isometry3<f64>)> = finalists
+        .par_iter()
+        .map(|pose| {
+            let run = run_schedule(mesh, &keypoints, pose, spacing_m / 2.0, &short, 1.0);
+            (consensus(mesh, &keypoints, &run.pose, band), run.pose)
+        })
+        .collect();
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    distinct_poses(scored, count, radius_m, distinct_m)
+}
+
+/// The poses of `scored` (best first) no two within `distinct_m` (thesis pose distance), at most
+/// `count`.
+fn distinct_poses(
+    scored: Vec<(f64, Isometry3<f64>)>,
+    count: usize,
+    radius_m: f64,
+    distinct_m: f64,
+) -> Vec<Isometry3<f64>> {
+    let mut kept: Vec<Isometry3<f64>> = Vec::new();
+    for (_, pose) in scored {
+        if kept.len() == count {
+            break;
+        }
+        if kept
+            .iter()
+            .all(|k| pose_distance(k, &pose, radius_m) > distinct_m)
+        {
+            kept.push(pose);
+        }
+    }
+    kept
+}
+
+/// Rigid poses of `mesh` in `cloud` within what `delta0_m` allows from `start`, best consensus
+/// first, at most `count` of them and no two within `distinct_m` of each other (thesis pose
+/// distance): the ends of the short runs of the exploration, for a caller that checks several.
+pub fn pose_candidates(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+    count: usize,
+    distinct_m: f64,
+) -> Vec<Isometry3<f64>> {
+    let (scored, _) = explore(mesh, cloud, start, delta0_m, options, Exploring::EXACT);
+    distinct_poses(scored, count, mesh.radius_m(), distinct_m)
+}
