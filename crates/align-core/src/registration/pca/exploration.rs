@@ -40,7 +40,7 @@ pub(super) fn explore(
 pub(super) struct Exploring<'a> {
     /// More starts (the detection's poses).
     pub(super) detected: &'a [Isometry3<f64>],
-    /// 1, or [`EXPLORATION_SLACK`] (see [`correspond`]).
+    /// 1, or [`EXPLORATION_SLACK`] (see [`super::correspond`]).
     pub(super) slack: f64,
 }
 

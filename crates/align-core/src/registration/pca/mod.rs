@@ -63,6 +63,12 @@ pub struct PcaOptions {
     /// Orientations explored around the start before the full run (0: none, the thesis's
     /// behaviour). Only those within the rotation delta allows are used.
     pub starts: usize,
+    /// The exploration from the start matches keypoints far off the part approximately (up to
+    /// 1.5 times the closest, exact within 2 cm of the surface) and, from a delta of half the
+    /// part's radius, also runs
+    /// from poses a point-pair-feature detection finds (default). Off: turns of the start only,
+    /// matched exactly, as the robot fit's rigid stage was measured.
+    pub wide_exploration: bool,
 }
 
 impl Default for PcaOptions {
@@ -83,6 +89,7 @@ impl Default for PcaOptions {
             tolerance_m: 5e-5,
             parallel: true,
             starts: 48,
+            wide_exploration: true,
         }
     }
 }
@@ -266,10 +273,18 @@ pub fn align_cloud(
     let mut schedule_from = delta0_m;
     let mut explored_ends: Vec<(f64, Isometry3<f64>)> = Vec::new();
     if options.starts > 0 {
-        let detected = detected_starts(mesh, cloud, base_from_part_start, delta0_m);
+        let detected = if options.wide_exploration {
+            detected_starts(mesh, cloud, base_from_part_start, delta0_m)
+        } else {
+            Vec::new()
+        };
         let exploring = Exploring {
             detected: &detected,
-            slack: EXPLORATION_SLACK,
+            slack: if options.wide_exploration {
+                EXPLORATION_SLACK
+            } else {
+                1.0
+            },
         };
         let (scored, explored) = explore(
             mesh,
