@@ -252,13 +252,20 @@ pub fn align_cloud(
         voxel_representatives(cloud, options.voxel_m)
     };
     let bounds = mesh.bounds();
+    // Every point within delta of the part counts here: seen from far off a small part, most
+    // points' closest feature is an edge or a corner, and a scan with the part and the floor
+    // within a metre of the start was refused for "1-2 points within delta"
+    // (docs/cad-scan-trials.md).
     let first = correspond(
         mesh,
         &keypoints,
         base_from_part_start,
         delta0_m,
         (&bounds.0, &bounds.1),
-        Lookup::exact(options.parallel),
+        Lookup {
+            keep_edge_points: true,
+            ..Lookup::exact(options.parallel)
+        },
         &mut [],
     );
     if first.len() < 6 {
@@ -425,8 +432,8 @@ fn run_schedule(
 ) -> ScheduleRun {
     let (lower, upper) = mesh.bounds();
     let lookup = Lookup {
-        parallel: options.parallel,
         slack,
+        ..Lookup::exact(options.parallel)
     };
     let mut hints = if slack > 1.0 {
         vec![NO_HINT; keypoints.len()]
@@ -531,6 +538,10 @@ struct Lookup {
     /// 1: the closest surface point; more: one up to that factor farther (see
     /// [`EXPLORATION_SLACK`]).
     slack: f64,
+    /// Keep the points whose closest feature is an edge or a corner more than
+    /// [`EDGE_REJECTION_M`] off, which the steps drop: the check that the scan holds enough of
+    /// the part near the start counts them.
+    keep_edge_points: bool,
 }
 
 impl Lookup {
@@ -538,6 +549,7 @@ impl Lookup {
         Self {
             parallel,
             slack: 1.0,
+            keep_edge_points: false,
         }
     }
 }
@@ -592,7 +604,7 @@ fn correspond(
         // A point whose nearest surface is an edge or corner, more than a millimetre off, lies
         // beyond the part: typically the floor or a fixture meeting it. Such points only drag
         // the part's edges towards the clutter.
-        if !closest.on_face && distance > EDGE_REJECTION_M {
+        if !lookup.keep_edge_points && !closest.on_face && distance > EDGE_REJECTION_M {
             return None;
         }
         let weight = (distance / delta * std::f64::consts::FRAC_PI_2).cos();
