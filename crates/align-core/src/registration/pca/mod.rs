@@ -440,6 +440,7 @@ fn run_schedule(
     } else {
         Vec::new()
     };
+    let mut reachable = Reachable::new(&lower, &upper, delta0_m);
     let radius_m = mesh.radius_m();
     let mut pose = *start;
     let mut stop = StopCriterion::new(options.window, options.tolerance_m, radius_m);
@@ -456,14 +457,15 @@ fn run_schedule(
         delta = delta_at(schedule_position, delta0_m, options);
         iterations += 1;
         schedule_position += 1;
+        reachable.update(keypoints, &pose, &mut hints);
         let matches = correspond(
             mesh,
-            keypoints,
+            &reachable.points,
             &pose,
             delta,
             (&lower, &upper),
             lookup,
-            &mut hints,
+            &mut reachable.hints,
         );
         if matches.len() < 6 {
             break;
@@ -500,6 +502,64 @@ fn run_schedule(
         iterations,
         converged,
         delta,
+    }
+}
+
+/// The keypoints a run can match, kept between its steps: a keypoint inside the part's box grown
+/// by the run's first band lies within `reach_m` of the box's centre, so one more than
+/// `reach_m + margin_m` from where the centre was at the last filtering cannot match until the
+/// centre has moved by more than `margin_m`. Exact: the matches, and their order, are those of
+/// all the keypoints; a scan of a cell holds ten times more keypoints than the part's
+/// neighbourhood, and each step tested every one against the box.
+struct Reachable {
+    box_centre: Point3<f64>,
+    reach_m: f64,
+    margin_m: f64,
+    filtered_at: Option<Point3<f64>>,
+    /// Indices into the run's keypoints, and those keypoints.
+    indices: Vec<usize>,
+    points: Vec<Point3<f64>>,
+    /// Each kept keypoint's hint (empty without), copied back to the run's when refiltered.
+    hints: Vec<u32>,
+}
+
+impl Reachable {
+    fn new(lower: &Point3<f64>, upper: &Point3<f64>, delta0_m: f64) -> Self {
+        let half = (upper - lower) / 2.0;
+        let reach_m = (half + Vector3::repeat(delta0_m)).norm();
+        Self {
+            box_centre: Point3::from((lower.coords + upper.coords) / 2.0),
+            reach_m,
+            margin_m: 0.25 * reach_m,
+            filtered_at: None,
+            indices: Vec::new(),
+            points: Vec::new(),
+            hints: Vec::new(),
+        }
+    }
+
+    fn update(&mut self, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, hints: &mut [u32]) {
+        let centre = pose * self.box_centre;
+        if self
+            .filtered_at
+            .is_some_and(|at| (centre - at).norm() <= self.margin_m)
+        {
+            return;
+        }
+        for (&index, &hint) in self.indices.iter().zip(&self.hints) {
+            hints[index] = hint;
+        }
+        let limit = self.reach_m + self.margin_m;
+        self.indices = (0..keypoints.len())
+            .filter(|&i| (keypoints[i] - centre).norm() <= limit)
+            .collect();
+        self.points = self.indices.iter().map(|&i| keypoints[i]).collect();
+        self.hints = if hints.is_empty() {
+            Vec::new()
+        } else {
+            self.indices.iter().map(|&i| hints[i]).collect()
+        };
+        self.filtered_at = Some(centre);
     }
 }
 
