@@ -211,6 +211,13 @@ pub fn run_pca_trials(
     run_trials(part, deltas_m, trials, seed, on_trial, |start, delta_m| {
         align_cloud(&part.mesh, &cloud, start, delta_m, options)
             .ok()
-            .map(|r| (r.alignment.base_from_part, r.alignment.iterations, false))
+            .map(|r| {
+                let ambiguous = r.uniqueness.as_ref().is_some_and(|u| u.ambiguous);
+                (
+                    r.alignment.base_from_part,
+                    r.alignment.iterations,
+                    ambiguous,
+                )
+            })
     })
 }
