@@ -100,6 +100,7 @@ fn parse_peer_lines(text: &str) -> Result<PeerOutcomes, PeerError> {
                         time_s: result.time_s,
                         ambiguous: false,
                         refused: None,
+                        miss_scores: None,
                     },
                     (_, error) => Outcome {
                         time_s: result.time_s,

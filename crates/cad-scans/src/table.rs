@@ -23,6 +23,11 @@ pub struct MethodCell {
     /// Trials the method reported ambiguous (ips only; counted by their pose too).
     pub ambiguous: usize,
     pub refused: usize,
+    /// Misses whose truth outscores the pose found: the search never reached it (ips only).
+    pub search_misses: usize,
+    /// Misses whose pose scores as well as the truth or better: the score cannot tell (ips
+    /// only).
+    pub score_misses: usize,
     pub median_error_mm: f64,
     pub median_time_s: f64,
 }
@@ -53,6 +58,9 @@ pub struct MethodRecord {
     pub time_s: f64,
     pub ambiguous: bool,
     pub refused: Option<String>,
+    /// ips's misses: the exploration's score of the pose found and of the truth.
+    pub found_score: Option<f64>,
+    pub truth_score: Option<f64>,
 }
 
 pub fn records(scored: &[Scored], methods: &[String]) -> Vec<TrialRecord> {
@@ -77,6 +85,8 @@ pub fn records(scored: &[Scored], methods: &[String]) -> Vec<TrialRecord> {
                         time_s: outcome.time_s,
                         ambiguous: outcome.ambiguous,
                         refused: outcome.refused.clone(),
+                        found_score: outcome.miss_scores.map(|m| m.found),
+                        truth_score: outcome.miss_scores.map(|m| m.truth),
                     })
                 })
                 .collect(),
@@ -130,6 +140,14 @@ fn cells(scored: &[&Scored], methods: &[String]) -> Vec<MethodCell> {
                 trials: ran.len(),
                 ambiguous: ran.iter().filter(|(_, o)| o.ambiguous).count(),
                 refused: ran.iter().filter(|(_, o)| o.refused.is_some()).count(),
+                search_misses: ran
+                    .iter()
+                    .filter(|(_, o)| o.miss_scores.is_some_and(|m| m.search_missed()))
+                    .count(),
+                score_misses: ran
+                    .iter()
+                    .filter(|(_, o)| o.miss_scores.is_some_and(|m| !m.search_missed()))
+                    .count(),
                 median_error_mm: median(&mut errors),
                 median_time_s: median(&mut times),
             }
@@ -192,6 +210,17 @@ pub fn markdown(rows: &[Row]) -> String {
             .collect();
         text += &format!("| median pose error | {} |\n", errors.join(" | "));
         text += &format!("| median time | {} |\n", times.join(" | "));
+        for cell in all
+            .cells
+            .iter()
+            .filter(|c| c.search_misses + c.score_misses > 0)
+        {
+            text += &format!(
+                "\n{}'s misses: {} where the truth scores higher (the search never reached it), \
+                 {} where the pose found scores as well or better (the score cannot tell).\n",
+                cell.method, cell.search_misses, cell.score_misses
+            );
+        }
     }
     text
 }

@@ -5,7 +5,10 @@
 
 use std::path::{Path, PathBuf};
 
+use align_core::geometry::Mesh;
+use align_core::io::{read_cloud, read_mesh};
 use align_core::registration::convergence::pose_distance;
+use align_core::registration::pca::{PcaOptions, scan_consensus};
 use align_core::trials::{
     SUCCESS_THRESHOLD_M, TrialRng, displace_about_centroid, random_displacement,
 };
@@ -136,6 +139,25 @@ pub struct Outcome {
     pub time_s: f64,
     pub ambiguous: bool,
     pub refused: Option<String>,
+    /// ips's misses only: the scan's score for the pose found and for the truth.
+    pub miss_scores: Option<MissScores>,
+}
+
+/// The exploration's score ([`align_core::registration::pca::scan_consensus`]) of a wrong pose
+/// and of the truth: a truth that scores higher was never reached by the search, one that
+/// scores lower or the same is a scan the score cannot read.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MissScores {
+    pub found: f64,
+    pub truth: f64,
+}
+
+impl MissScores {
+    /// The search's miss when the truth outscores the found pose by more than the scores'
+    /// sampling noise (2 sqrt(score), as the uniqueness test uses).
+    pub fn search_missed(&self) -> bool {
+        self.truth - self.found > 2.0 * self.truth.max(0.0).sqrt()
+    }
 }
 
 impl Outcome {
@@ -145,6 +167,7 @@ impl Outcome {
             time_s: 0.0,
             ambiguous: false,
             refused: Some(reason.into()),
+            miss_scores: None,
         }
     }
 
@@ -178,15 +201,32 @@ pub fn run_ips(trial: &Trial) -> Outcome {
                 Some(rows) => isometry_from_rows(rows),
                 None => align_core::pose::isometry_from_xyz_rpy(pose.xyz, pose.rpy),
             };
-            Outcome {
+            let mut outcome = Outcome {
                 pose: Some(pose),
                 time_s: report.alignment.time_s,
                 ambiguous: report.ambiguous,
                 refused: None,
+                miss_scores: None,
+            };
+            if !outcome.succeeded(trial) {
+                outcome.miss_scores = miss_scores(trial, &pose, &job.options);
             }
+            outcome
         }
         Err(error) => Outcome::refused(error.0),
     }
+}
+
+/// The scores of a wrong pose and of the truth on the trial's files (after the timed run);
+/// `None` when the files no longer read.
+fn miss_scores(trial: &Trial, pose: &Isometry3<f64>, options: &PcaOptions) -> Option<MissScores> {
+    let soup = read_mesh(&trial.files.mesh, 1.0).ok()?;
+    let mesh = Mesh::new(&soup.vertices, &soup.triangles).ok()?;
+    let cloud = read_cloud(&trial.files.cloud, 1.0).ok()?;
+    Some(MissScores {
+        found: scan_consensus(&mesh, &cloud, pose, options),
+        truth: scan_consensus(&mesh, &cloud, &trial.world_from_part, options),
+    })
 }
 
 /// Where the trial's files are, for a manifest.
@@ -201,4 +241,29 @@ pub fn write_manifest(path: &Path, trials: &[Trial]) -> std::io::Result<()> {
         .collect();
     let text = serde_json::to_string_pretty(&paths).map_err(std::io::Error::other)?;
     std::fs::write(path, text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::MissScores;
+
+    #[test]
+    fn a_miss_is_the_searchs_only_when_the_truth_scores_clearly_higher() {
+        let search = MissScores {
+            found: 300.0,
+            truth: 900.0,
+        };
+        assert!(search.search_missed());
+        let score = MissScores {
+            found: 320.0,
+            truth: 300.0,
+        };
+        assert!(!score.search_missed());
+        // Within the scores' noise (2 sqrt(100) = 20): the score cannot tell them apart.
+        let close = MissScores {
+            found: 90.0,
+            truth: 100.0,
+        };
+        assert!(!close.search_missed());
+    }
 }

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::{PcaOptions, consensus, exploration_scoring, run_schedule};
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
-use crate::registration::ppf::{PpfOptions, ppf_poses};
+use crate::registration::ppf::{PpfOptions, ppf_poses_where};
 use crate::registration::psa::spread_rotations;
 use crate::registration::sampling::voxel_representatives;
 
@@ -101,18 +101,20 @@ pub(super) fn detected_starts(
             .max((area_m2 / DETECTION_MODEL_SAMPLES).sqrt()),
         ..PpfOptions::default()
     };
-    ppf_poses(
+    // Applied before the votes are ranked: the poses a thin link's scan votes for most are
+    // mostly turned further than delta allows (see `ppf_poses_where`).
+    let within_turn = |pose: &Isometry3<f64>| pose.rotation.angle_to(&start.rotation) <= max_angle;
+    ppf_poses_where(
         mesh,
         cloud,
-        &(start * Point3::origin()),
-        reach_m,
+        (&(start * Point3::origin()), reach_m),
         &options,
         DETECTED_STARTS,
         0.3,
+        &within_turn,
     )
     .into_iter()
     .map(|pose| pose.world_from_model)
-    .filter(|pose| pose.rotation.angle_to(&start.rotation) <= max_angle)
     .collect()
 }
 

@@ -407,6 +407,20 @@ fn uniqueness(
     })
 }
 
+/// The score the exploration ranks poses by (coarse keypoints of `cloud` within a band of the
+/// part's surface at `pose`, less those inside it), for telling why a pose is wrong against a
+/// known truth: a truth that scores higher is a pose the search never reached; one that scores
+/// lower is a scan the score cannot read (crates/cad-scans).
+pub fn scan_consensus(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    options: &PcaOptions,
+) -> f64 {
+    let (coarse, band) = exploration_scoring(cloud, options);
+    consensus(mesh, &coarse, pose, band)
+}
+
 /// The coarse keypoints and the band the exploration scores its runs with.
 fn exploration_scoring(cloud: &[Point3<f64>], options: &PcaOptions) -> (Vec<Point3<f64>>, f64) {
     (
