@@ -284,7 +284,7 @@ pub fn align_cloud(
     if options.starts > 0 {
         let wide = options.wide_exploration && is_wide(mesh, delta0_m);
         let detected = if wide {
-            detected_starts(mesh, cloud, base_from_part_start, delta0_m)
+            detected_starts(mesh, cloud, base_from_part_start, delta0_m, options)
         } else {
             Vec::new()
         };
