@@ -120,7 +120,7 @@ pub(super) fn detected_starts(
         &within_turn,
     );
     // Votes count the scene references that agree on a pose, and on a thin link in clutter the
-    // floor and the box agree on many: the true pose ranked 37th to 157th by votes in the
+    // floor and the box agree on many: the near-true pose ranked 3rd to 158th by votes in the
     // 500-1000 mm cad-scans misses looked at. Ranked by how much of the scan the pose explains
     // (the exploration's consensus, in a band of two detection steps, as far as a detected
     // pose is from the one it stands for), the near-true pose was among the 16 kept in most.
