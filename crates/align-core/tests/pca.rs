@@ -6,7 +6,7 @@
 use align_core::geometry::Mesh;
 use align_core::geometry::shapes::extrude;
 use align_core::registration::pca::{PcaOptions, PcaStep, align_cloud, pose_candidates_spread};
-use align_core::trials::clouds::{ScanOptions, scan_part};
+use align_core::trials::clouds::{ScanOptions, pca_trial_scan, scan_part};
 use align_core::trials::{TrialRng, displace_about_centroid, random_displacement};
 use nalgebra::{Isometry3, Point3};
 
@@ -279,22 +279,8 @@ fn a_detected_start_near_the_truth_is_not_pulled_into_the_clutter() {
     use align_core::registration::convergence::pose_distance;
     use align_core::trials::{parts, trial_pose};
     let part = parts::step_block().unwrap();
-    // The scan `ips trials --pca` makes (ips_client::commands::trials::parts::trial_scan).
-    let scan = ScanOptions {
-        spacing_m: 0.006,
-        noise_sigma_m: 0.0003,
-        outlier_fraction: 0.1,
-        floor: true,
-        neighbour: true,
-        scanners: vec![
-            Point3::new(0.0, 0.0, 1.6),
-            Point3::new(1.6, -1.2, 1.0),
-            Point3::new(1.4, 0.9, 0.9),
-        ],
-        seed: 7,
-    };
     let truth = trial_pose();
-    let cloud = scan_part(&part.mesh, &truth, &scan);
+    let cloud = scan_part(&part.mesh, &truth, &pca_trial_scan());
     let delta_m: f64 = 0.5;
     let radius_m = part.mesh.radius_m();
     let mut rng = TrialRng::new(2024 ^ delta_m.to_bits());

@@ -12,7 +12,7 @@ use align_core::io::{TriangleSoup, write_stl_binary};
 use align_core::pose::{isometry_from_xyz_rpy, xyz_rpy};
 use align_core::robots::ShippedRobot;
 use align_core::trials::parts::step_block;
-use nalgebra::{Isometry3, Point3};
+use nalgebra::Isometry3;
 use protocol::Pose;
 use protocol::session::{FORMAT, Inspection, PartSection, RobotSection, SessionFile, ToolSection};
 
@@ -130,16 +130,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // outliers and 0.3 mm noise, written in mm with 0.01 mm resolution.
     let scan = align_core::trials::clouds::ScanOptions {
         spacing_m: 0.008,
-        noise_sigma_m: 0.0003,
-        outlier_fraction: 0.1,
-        floor: true,
-        neighbour: true,
-        scanners: vec![
-            Point3::new(0.0, 0.0, 1.6),
-            Point3::new(1.6, -1.2, 1.0),
-            Point3::new(1.4, 0.9, 0.9),
-        ],
         seed: 2024,
+        ..align_core::trials::clouds::pca_trial_scan()
     };
     let cloud = align_core::trials::clouds::scan_part(&part.mesh, &truth, &scan);
     let text: String = cloud

@@ -73,6 +73,24 @@ fn sample_surface(
     points
 }
 
+/// The scan `ips trials --pca` aligns to (docs/pca-trials.md): the cell as a scanner sees it,
+/// from three positions, with the floor, a neighbouring box, 10% outliers and 0.3 mm noise.
+pub fn pca_trial_scan() -> ScanOptions {
+    ScanOptions {
+        spacing_m: 0.006,
+        noise_sigma_m: 0.0003,
+        outlier_fraction: 0.1,
+        floor: true,
+        neighbour: true,
+        scanners: vec![
+            Point3::new(0.0, 0.0, 1.6),
+            Point3::new(1.6, -1.2, 1.0),
+            Point3::new(1.4, 0.9, 0.9),
+        ],
+        seed: 7,
+    }
+}
+
 /// A scan of `mesh` placed at `base_from_part`, with the clutter the options ask for.
 pub fn scan_part(
     mesh: &Mesh,

@@ -3,7 +3,7 @@
 
 use align_core::registration::pca::{PcaOptions, PcaStep};
 use align_core::registration::psa::{PsaMethod, PsaOptions, Search};
-use align_core::trials::clouds::ScanOptions;
+use align_core::trials::clouds::pca_trial_scan;
 use align_core::trials::parts::{TestPart, step_block};
 use align_core::trials::{TouchSetup, TrialRow, run_pca_trials, run_psa_trials};
 use serde::Serialize;
@@ -75,23 +75,6 @@ struct Configuration {
     options: PsaOptions,
 }
 
-/// The scan PCA trials run on: the cell as a scanner sees it.
-pub fn trial_scan() -> ScanOptions {
-    ScanOptions {
-        spacing_m: 0.006,
-        noise_sigma_m: 0.0003,
-        outlier_fraction: 0.1,
-        floor: true,
-        neighbour: true,
-        scanners: vec![
-            nalgebra::Point3::new(0.0, 0.0, 1.6),
-            nalgebra::Point3::new(1.6, -1.2, 1.0),
-            nalgebra::Point3::new(1.4, 0.9, 0.9),
-        ],
-        seed: 7,
-    }
-}
-
 /// The thesis's PCA: SVD steps, voxel-centroid keypoints, no exploration.
 pub fn thesis_pca_options() -> PcaOptions {
     PcaOptions {
@@ -108,7 +91,7 @@ fn run_pca(
     deltas_m: &[f64],
     mut progress: impl FnMut(&str),
 ) -> Vec<TrialTable> {
-    let scan = trial_scan();
+    let scan = pca_trial_scan();
     [
         ("thesis", thesis_pca_options()),
         ("ours", PcaOptions::default()),
