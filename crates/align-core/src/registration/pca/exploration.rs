@@ -40,8 +40,15 @@ pub(super) fn explore(
 pub(super) struct Exploring<'a> {
     /// More starts (the detection's poses).
     pub(super) detected: &'a [Isometry3<f64>],
-    /// 1, or [`EXPLORATION_SLACK`] (see [`super::correspond`]).
+    /// 1, or [`EXPLORATION_SLACK`] (see [`super::matching::correspond`]).
     pub(super) slack: f64,
+    /// The runs keep the large planes the score leaves out (see [`super::planes`]). The runs
+    /// about a found pose look for its twins, and a twin of a part resting on the floor rests
+    /// on it too: with the floor's points a symmetric box's runs reached its half-turn twin,
+    /// without them none did (`tests/pca.rs`). The runs from a far start leave them out: the
+    /// floor pulled thin parts flat into it (docs/cad-scan-trials.md: 128 against 136 of 200
+    /// scans with them kept in every run).
+    pub(super) runs_keep_planes: bool,
 }
 
 impl Exploring<'_> {
@@ -50,6 +57,7 @@ impl Exploring<'_> {
     pub(super) const EXACT: Exploring<'static> = Exploring {
         detected: &[],
         slack: 1.0,
+        runs_keep_planes: true,
     };
 }
 
@@ -124,7 +132,7 @@ pub(super) fn detected_starts(
     // 500-1000 mm cad-scans misses looked at. Ranked by how much of the scan the pose explains
     // (the exploration's consensus, in a band of two detection steps, as far as a detected
     // pose is from the one it stands for), the near-true pose was among the 16 kept in most.
-    let (coarse, _) = exploration_scoring(cloud, pca_options);
+    let (coarse, _) = exploration_scoring(mesh, cloud, pca_options);
     let band_m = DETECTION_SCORE_BAND_PER_STEP * options.step_m;
     let mut scored: Vec<(f64, Isometry3<f64>)> = detected
         .par_iter()
@@ -153,7 +161,14 @@ pub(super) fn explore_turns(
     options: &PcaOptions,
     exploring: Exploring,
 ) -> (Vec<(f64, Isometry3<f64>)>, usize) {
-    let (coarse, band) = exploration_scoring(cloud, options);
+    let (coarse, band) = exploration_scoring(mesh, cloud, options);
+    let with_planes;
+    let run_points = if exploring.runs_keep_planes && options.without_large_planes {
+        with_planes = voxel_representatives(cloud, options.voxel_m * 3.0);
+        &with_planes
+    } else {
+        &coarse
+    };
     let short = PcaOptions {
         max_iterations: 40,
         window: 3,
@@ -198,7 +213,7 @@ pub(super) fn explore_turns(
         .map(|(candidate, band_m)| {
             let run = run_schedule(
                 mesh,
-                &coarse,
+                run_points,
                 candidate,
                 *band_m,
                 &run_options,

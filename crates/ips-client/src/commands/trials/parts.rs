@@ -75,12 +75,13 @@ struct Configuration {
     options: PsaOptions,
 }
 
-/// The thesis's PCA: SVD steps, voxel-centroid keypoints, no exploration.
+/// The thesis's PCA: SVD steps, voxel-centroid keypoints, no exploration, no polishing run.
 pub fn thesis_pca_options() -> PcaOptions {
     PcaOptions {
         step: PcaStep::PointToPoint,
         voxel_centroids: true,
         starts: 0,
+        polish: false,
         ..PcaOptions::default()
     }
 }

@@ -65,6 +65,9 @@ impl Default for RobotFitOptions {
                 window: 5,
                 // The robot trials (docs/articulated-trials.md) were measured without it.
                 wide_exploration: false,
+                // Bringing the base near is all this stage is for; the joint refinement ends it.
+                polish: false,
+                without_large_planes: false,
                 ..PcaOptions::default()
             },
             // The proximal links are small: 15 mm keypoints (45 mm for the exploration's and the
@@ -73,6 +76,9 @@ impl Default for RobotFitOptions {
                 voxel_m: 0.015,
                 schedule_iterations: 40,
                 max_iterations: 60,
+                // As measured for docs/articulated-trials.md.
+                polish: false,
+                without_large_planes: false,
                 ..PcaOptions::default()
             },
             detection: PpfOptions::default(),

@@ -1,0 +1,127 @@
+//! The correspondence step of the PCA loop: the cut-off and measure filters, each kept keypoint's
+//! closest surface point (exact, or approximate far off the part) and its weight.
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
+
+use crate::geometry::Mesh;
+
+/// One kept keypoint: where it is (base), its surface correspondence (base) and normal.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Match {
+    pub(super) point: Point3<f64>,
+    pub(super) surface: Point3<f64>,
+    pub(super) normal: Vector3<f64>,
+    pub(super) distance: f64,
+    pub(super) weight: f64,
+}
+
+const EDGE_REJECTION_M: f64 = 1e-3;
+
+/// How [`correspond`] finds each keypoint's surface point.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Lookup {
+    /// Parallel over the keypoints (rayon).
+    pub(super) parallel: bool,
+    /// 1: the closest surface point; more: one up to that factor farther (see
+    /// [`EXPLORATION_SLACK`](super::exploration::EXPLORATION_SLACK)).
+    pub(super) slack: f64,
+    /// Keep the points whose closest feature is an edge or a corner more than
+    /// [`EDGE_REJECTION_M`] off, which the steps drop: the check that the scan holds enough of
+    /// the part near the start counts them.
+    pub(super) keep_edge_points: bool,
+}
+
+impl Lookup {
+    pub(super) fn exact(parallel: bool) -> Self {
+        Self {
+            parallel,
+            slack: 1.0,
+            keep_edge_points: false,
+        }
+    }
+}
+
+/// A slack lookup's answers nearer the surface than this are made exact.
+const EXACT_WITHIN_M: f64 = 0.02;
+
+/// No triangle remembered for a keypoint yet.
+pub(super) const NO_HINT: u32 = u32::MAX;
+
+/// Cut-off and measure filters, then the surface correspondence and weight of each keypoint.
+/// `hints` (one per keypoint, or empty) remember each keypoint's triangle between the steps of
+/// an approximate run, whose far queries they answer in one projection.
+pub(super) fn correspond(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    delta: f64,
+    (lower, upper): (&Point3<f64>, &Point3<f64>),
+    lookup: Lookup,
+    hints: &mut [u32],
+) -> Vec<Match> {
+    let part_from_base = pose.inverse();
+    let one = |point: &Point3<f64>, hint: Option<&mut u32>| -> Option<Match> {
+        let in_part = part_from_base * point;
+        let inside_box = (0..3).all(|axis| {
+            in_part[axis] >= lower[axis] - delta && in_part[axis] <= upper[axis] + delta
+        });
+        if !inside_box {
+            return None;
+        }
+        let closest = if lookup.slack > 1.0 {
+            let remembered = hint.as_ref().map(|h| **h).filter(|&h| h != NO_HINT);
+            let found =
+                mesh.closest_point_within_slack(&in_part, delta, lookup.slack, remembered)?;
+            if let Some(hint) = hint {
+                *hint = found.triangle;
+            }
+            // Near the surface the exact answer, bounded by the approximate one (a short
+            // search): the points that hold the part in place must pull along the right
+            // normals, or the runs end short of their optimum and score below it.
+            if found.signed_distance.abs() <= EXACT_WITHIN_M {
+                mesh.closest_point_within(&in_part, found.signed_distance.abs() + 1e-9)
+                    .unwrap_or(found)
+            } else {
+                found
+            }
+        } else {
+            mesh.closest_point_within(&in_part, delta)?
+        };
+        let distance = closest.signed_distance.abs();
+        // A point whose nearest surface is an edge or corner, more than a millimetre off, lies
+        // beyond the part: typically the floor or a fixture meeting it. Such points only drag
+        // the part's edges towards the clutter.
+        if !lookup.keep_edge_points && !closest.on_face && distance > EDGE_REJECTION_M {
+            return None;
+        }
+        let weight = (distance / delta * std::f64::consts::FRAC_PI_2).cos();
+        (weight > 0.0).then(|| Match {
+            point: *point,
+            surface: pose * closest.point,
+            normal: pose.rotation * closest.normal,
+            distance,
+            weight,
+        })
+    };
+    match (lookup.parallel, hints.len() == keypoints.len()) {
+        (true, true) => keypoints
+            .par_iter()
+            .zip(hints.par_iter_mut())
+            .filter_map(|(point, hint)| one(point, Some(hint)))
+            .collect(),
+        (true, false) => keypoints
+            .par_iter()
+            .filter_map(|point| one(point, None))
+            .collect(),
+        (false, true) => keypoints
+            .iter()
+            .zip(hints.iter_mut())
+            .filter_map(|(point, hint)| one(point, Some(hint)))
+            .collect(),
+        (false, false) => keypoints
+            .iter()
+            .filter_map(|point| one(point, None))
+            .collect(),
+    }
+}

@@ -1,0 +1,125 @@
+//! The polishing run after the schedule. The schedule ends in a band of `delta_min` (1 cm), wide
+//! enough for the floor and the fixtures beside a part to pull it: from the true pose itself, a
+//! fifth of the 50 mm CAD scans ended more than 1 mm off (docs/cad-scan-trials.md). The polish
+//! measures the residuals' spread there and steps in a band fitted to it, as an M-estimator with
+//! Tukey's biweight and a robust scale would, so that a noisier scanner keeps a wider band.
+
+use nalgebra::{Isometry3, Point3};
+
+use super::matching::{Lookup, Match, correspond};
+use super::{PcaOptions, step_for};
+use crate::geometry::Mesh;
+use crate::registration::convergence::pose_distance;
+
+/// Residuals this many robust standard deviations off still count (Tukey's biweight constant:
+/// 95 % efficiency for Gaussian noise).
+const BAND_PER_SIGMA: f64 = 4.685;
+
+/// The band stays between these fractions of the schedule's last band: the lower keeps a
+/// noise-free scan from a band of nothing, the upper keeps clutter that fills the residuals out.
+const BAND_FRACTION_RANGE: (f64, f64) = (0.1, 0.5);
+
+/// The polish starts where the schedule converged: a handful of point-to-plane steps settle it.
+const MAX_ITERATIONS: usize = 30;
+
+/// The same keypoint set must agree this many times in a row that the pose stands still.
+const STILL_STEPS: usize = 2;
+
+/// Fewer matches than this measure no spread.
+const MIN_MATCHES: usize = 12;
+
+pub(super) struct Polished {
+    pub pose: Isometry3<f64>,
+    pub iterations: usize,
+    pub converged: bool,
+    pub band_m: f64,
+}
+
+/// Steps from `pose` in a band of [`BAND_PER_SIGMA`] robust standard deviations of the
+/// residuals, starting from half of `band_m`, the schedule's last band. `None` when fewer than
+/// [`MIN_MATCHES`] keypoints match, too few to measure a spread.
+pub(super) fn polish(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    band_m: f64,
+    options: &PcaOptions,
+) -> Option<Polished> {
+    let (lower, upper) = mesh.bounds();
+    // The polish moves the part by millimetres: the keypoints within the schedule's band of the
+    // part's box are all it can reach, a few percent of a cell's scan.
+    let part_from_base = pose.inverse();
+    let near: Vec<Point3<f64>> = keypoints
+        .iter()
+        .filter(|p| {
+            let in_part = part_from_base * *p;
+            (0..3).all(|axis| {
+                in_part[axis] >= lower[axis] - band_m && in_part[axis] <= upper[axis] + band_m
+            })
+        })
+        .copied()
+        .collect();
+    let exact = Lookup::exact(options.parallel);
+    let (least, most) = BAND_FRACTION_RANGE;
+    let radius_m = mesh.radius_m();
+    let mut band = most * band_m;
+    let mut polished = *pose;
+    let mut still = 0;
+    let mut iterations = 0;
+    while iterations < MAX_ITERATIONS {
+        let mut matches = correspond(
+            mesh,
+            &near,
+            &polished,
+            band,
+            (&lower, &upper),
+            exact,
+            &mut [],
+        );
+        if matches.len() < MIN_MATCHES {
+            break;
+        }
+        // The scale is measured again on each step's matches and the band only shrinks: clutter
+        // that widened the first spread falls out of the band, and the spread with it.
+        band = band.min(robust_band(&mut matches).max(least * band_m));
+        matches.retain(|m| m.distance <= band);
+        if matches.len() < MIN_MATCHES {
+            break;
+        }
+        for m in &mut matches {
+            m.weight = (m.distance / band * std::f64::consts::FRAC_PI_2).cos();
+        }
+        iterations += 1;
+        let Some(step) = step_for(&matches, options.step, radius_m) else {
+            break;
+        };
+        let previous = polished;
+        polished = step * polished;
+        still = if pose_distance(&previous, &polished, radius_m) <= options.tolerance_m {
+            still + 1
+        } else {
+            0
+        };
+        if still >= STILL_STEPS {
+            break;
+        }
+    }
+    if iterations == 0 {
+        return None;
+    }
+    Some(Polished {
+        pose: polished,
+        iterations,
+        converged: still >= STILL_STEPS,
+        band_m: band,
+    })
+}
+
+/// [`BAND_PER_SIGMA`] times the robust standard deviation (1.4826 times the median) of the
+/// matches' distances.
+fn robust_band(matches: &mut [Match]) -> f64 {
+    let middle = matches.len() / 2;
+    let (_, median, _) =
+        matches.select_nth_unstable_by(middle, |a, b| a.distance.total_cmp(&b.distance));
+    BAND_PER_SIGMA * 1.4826 * median.distance
+}
