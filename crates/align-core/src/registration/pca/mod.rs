@@ -326,18 +326,29 @@ pub fn align_cloud(
         // fills nearly the same space: a band of half the part's radius keeps the clutter out.
         let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
         let band = delta0_m.min(0.5 * mesh.radius_m());
-        let (around, _) = explore_turns(
-            mesh,
-            cloud,
-            &run.pose,
-            max_angle,
-            band,
-            options,
-            // Exact: with the slack these runs found the twin of a symmetric box in no start
-            // (crates/align-core/tests/pca.rs, before answers near the surface were made
-            // exact), and their band is narrow, so cheap anyway.
-            Exploring::EXACT,
-        );
+        // Exact: with the slack these runs found the twin of a symmetric box in no start
+        // (crates/align-core/tests/pca.rs, before answers near the surface were made exact),
+        // and their band is narrow, so cheap anyway. Run with the large planes and without:
+        // with the floor's points a symmetric box's runs reached its half-turn twin, which
+        // rests on the floor as well (crates/align-core/tests/pca.rs), and without them none
+        // did; with them only, one of three cylinder scans was reported unique
+        // (crates/cad-scans/tests/refusals.rs).
+        let mut around = Vec::new();
+        let plane_sets: &[bool] = if options.without_large_planes {
+            &[true, false]
+        } else {
+            &[true]
+        };
+        for &runs_keep_planes in plane_sets {
+            let exploring = Exploring {
+                runs_keep_planes,
+                ..Exploring::EXACT
+            };
+            let (ends, _) =
+                explore_turns(mesh, cloud, &run.pose, max_angle, band, options, exploring);
+            around.extend(ends);
+        }
+        around.sort_by(|a, b| b.0.total_cmp(&a.0));
         let (coarse, score_band) = exploration_scoring(mesh, cloud, options);
         let found_score = consensus(mesh, &coarse, &run.pose, score_band);
         if let Some((better_score, better)) = around.first()
