@@ -283,6 +283,13 @@ impl Mesh {
         self.trimesh.triangle(triangle).area()
     }
 
+    /// Area of the whole surface, m^2.
+    pub fn area_m2(&self) -> f64 {
+        (0..self.num_triangles() as u32)
+            .map(|t| self.triangle_area(t))
+            .sum()
+    }
+
     /// Mean of the vertices.
     pub fn centroid(&self) -> Point3<f64> {
         self.centroid

@@ -105,9 +105,7 @@ pub(super) fn detected_starts(
     let reach_m = 1.2 * delta0_m + 2.0 * mesh.centroid().coords.norm();
     // A tenth of the radius resolves a small part's shape; on a large one the sample count is
     // capped instead, since the model's table grows with its square and the voting with it.
-    let area_m2: f64 = (0..mesh.num_triangles() as u32)
-        .map(|t| mesh.triangle_area(t))
-        .sum();
+    let area_m2 = mesh.area_m2();
     let options = PpfOptions {
         step_m: (radius_m / 10.0)
             .clamp(0.006, 0.015)

@@ -39,9 +39,7 @@ pub(super) fn without_large_planes(
     mesh: &Mesh,
     voxel_m: f64,
 ) -> Vec<Point3<f64>> {
-    let part_area: f64 = (0..mesh.num_triangles() as u32)
-        .map(|t| mesh.triangle_area(t))
-        .sum();
+    let part_area = mesh.area_m2();
     let most_keypoints = LARGER_THAN_PART * part_area / (voxel_m * voxel_m);
     let mut kept = coarse;
     let mut rng = SplitMix64::new(0x9e37_79b9_7f4a_7c15 ^ kept.len() as u64);
