@@ -5,7 +5,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rayon::prelude::*;
 
-use super::{PcaOptions, consensus, exploration_scoring, run_schedule};
+use super::{Coarse, PcaOptions, consensus, run_schedule};
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
 use crate::registration::ppf::{PpfOptions, ppf_poses_where};
@@ -25,14 +25,14 @@ pub(super) const EXPLORATION_SLACK: f64 = 1.5;
 /// were made.
 pub(super) fn explore(
     mesh: &Mesh,
-    cloud: &[Point3<f64>],
+    coarse: &Coarse,
     start: &Isometry3<f64>,
     delta0_m: f64,
     options: &PcaOptions,
     exploring: Exploring,
 ) -> (Vec<(f64, Isometry3<f64>)>, usize) {
     let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
-    explore_turns(mesh, cloud, start, max_angle, delta0_m, options, exploring)
+    explore_turns(mesh, coarse, start, max_angle, delta0_m, options, exploring)
 }
 
 /// What an exploration adds to its turns of the start, and how exactly its runs match.
@@ -92,9 +92,9 @@ const DETECTION_SCORE_BAND_PER_STEP: f64 = 2.0;
 pub(super) fn detected_starts(
     mesh: &Mesh,
     cloud: &[Point3<f64>],
+    coarse: &Coarse,
     start: &Isometry3<f64>,
     delta0_m: f64,
-    pca_options: &PcaOptions,
 ) -> Vec<Isometry3<f64>> {
     let radius_m = mesh.radius_m();
     if !is_wide(mesh, delta0_m) {
@@ -130,13 +130,12 @@ pub(super) fn detected_starts(
     // 500-1000 mm cad-scans misses looked at. Ranked by how much of the scan the pose explains
     // (the exploration's consensus, in a band of two detection steps, as far as a detected
     // pose is from the one it stands for), the near-true pose was among the 16 kept in most.
-    let (coarse, _) = exploration_scoring(mesh, cloud, pca_options);
     let band_m = DETECTION_SCORE_BAND_PER_STEP * options.step_m;
     let mut scored: Vec<(f64, Isometry3<f64>)> = detected
         .par_iter()
         .map(|found| {
             let pose = found.world_from_model;
-            (consensus(mesh, &coarse, &pose, band_m), pose)
+            (consensus(mesh, coarse.scored(), &pose, band_m), pose)
         })
         .collect();
     // Stable: poses that score alike keep their vote order.
@@ -152,20 +151,17 @@ pub(super) fn detected_starts(
 /// `delta0_m`.
 pub(super) fn explore_turns(
     mesh: &Mesh,
-    cloud: &[Point3<f64>],
+    coarse: &Coarse,
     start: &Isometry3<f64>,
     max_angle: f64,
     delta0_m: f64,
     options: &PcaOptions,
     exploring: Exploring,
 ) -> (Vec<(f64, Isometry3<f64>)>, usize) {
-    let (coarse, band) = exploration_scoring(mesh, cloud, options);
-    let with_planes;
-    let run_points = if exploring.runs_keep_planes && options.without_large_planes {
-        with_planes = voxel_representatives(cloud, options.voxel_m * 3.0);
-        &with_planes
+    let run_points = if exploring.runs_keep_planes {
+        &coarse.all
     } else {
-        &coarse
+        coarse.scored()
     };
     let short = PcaOptions {
         max_iterations: 40,
@@ -217,7 +213,7 @@ pub(super) fn explore_turns(
                 &run_options,
                 exploring.slack,
             );
-            (consensus(mesh, &coarse, &run.pose, band), run.pose)
+            (coarse.score(mesh, &run.pose), run.pose)
         })
         .collect();
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -345,6 +341,7 @@ pub fn pose_candidates(
     count: usize,
     distinct_m: f64,
 ) -> Vec<Isometry3<f64>> {
-    let (scored, _) = explore(mesh, cloud, start, delta0_m, options, Exploring::EXACT);
+    let coarse = Coarse::new(mesh, cloud, options);
+    let (scored, _) = explore(mesh, &coarse, start, delta0_m, options, Exploring::EXACT);
     distinct_poses(scored, count, mesh.radius_m(), distinct_m)
 }

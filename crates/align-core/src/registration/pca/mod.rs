@@ -288,10 +288,11 @@ pub fn align_cloud(
     let mut starts = 1;
     let mut schedule_from = delta0_m;
     let mut explored_ends: Vec<(f64, Isometry3<f64>)> = Vec::new();
-    if options.starts > 0 {
+    let coarse = (options.starts > 0).then(|| Coarse::new(mesh, cloud, options));
+    if let Some(coarse) = &coarse {
         let wide = options.wide_exploration && is_wide(mesh, delta0_m);
         let detected = if wide {
-            detected_starts(mesh, cloud, base_from_part_start, delta0_m, options)
+            detected_starts(mesh, cloud, coarse, base_from_part_start, delta0_m)
         } else {
             Vec::new()
         };
@@ -304,7 +305,7 @@ pub fn align_cloud(
         };
         let (scored, explored) = explore(
             mesh,
-            cloud,
+            coarse,
             base_from_part_start,
             delta0_m,
             options,
@@ -319,7 +320,7 @@ pub fn align_cloud(
     }
     let mut run = run_schedule(mesh, &keypoints, &start, schedule_from, options, 1.0);
     let mut uniqueness_found = None;
-    if options.starts > 0 {
+    if let Some(coarse) = &coarse {
         // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
         // other pose) that no run from the start reached shows up here, and so does a better
         // pose the exploration from the start missed. A twin turned about the part's centre
@@ -345,22 +346,21 @@ pub fn align_cloud(
                 ..Exploring::EXACT
             };
             let (ends, _) =
-                explore_turns(mesh, cloud, &run.pose, max_angle, band, options, exploring);
+                explore_turns(mesh, coarse, &run.pose, max_angle, band, options, exploring);
             around.extend(ends);
         }
         around.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let (coarse, score_band) = exploration_scoring(mesh, cloud, options);
-        let found_score = consensus(mesh, &coarse, &run.pose, score_band);
+        let found_score = coarse.score(mesh, &run.pose);
         if let Some((better_score, better)) = around.first()
             && *better_score > found_score + 2.0 * found_score.max(0.0).sqrt()
         {
             let again = run_schedule(mesh, &keypoints, better, schedule_from, options, 1.0);
-            if consensus(mesh, &coarse, &again.pose, score_band) > found_score {
+            if coarse.score(mesh, &again.pose) > found_score {
                 run = again;
             }
         }
         explored_ends.extend(around);
-        uniqueness_found = uniqueness(mesh, cloud, &run.pose, &explored_ends, options);
+        uniqueness_found = uniqueness(mesh, coarse, &run.pose, &explored_ends);
     }
     if options.polish
         && let Some(polished) = polish(mesh, &keypoints, &run.pose, run.delta, options)
@@ -404,12 +404,10 @@ pub fn align_cloud(
 /// The pose against the best exploration end that is a different pose, scored alike.
 fn uniqueness(
     mesh: &Mesh,
-    cloud: &[Point3<f64>],
+    coarse: &Coarse,
     pose: &Isometry3<f64>,
     ends: &[(f64, Isometry3<f64>)],
-    options: &PcaOptions,
 ) -> Option<Uniqueness> {
-    let (coarse, band) = exploration_scoring(mesh, cloud, options);
     let same = SAME_POSE_FRACTION_OF_RADIUS * mesh.radius_m();
     let centre = mesh.centroid();
     let (runner_up_score, runner_up) = ends
@@ -421,7 +419,7 @@ fn uniqueness(
             shift.max(turn) > same
         })
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
-    let score = consensus(mesh, &coarse, pose, band).max(*runner_up_score);
+    let score = coarse.score(mesh, pose).max(*runner_up_score);
     let margin = if score > 0.0 {
         (score - runner_up_score) / score
     } else {
@@ -446,28 +444,44 @@ pub fn scan_consensus(
     pose: &Isometry3<f64>,
     options: &PcaOptions,
 ) -> f64 {
-    let (coarse, band) = exploration_scoring(mesh, cloud, options);
-    consensus(mesh, &coarse, pose, band)
+    Coarse::new(mesh, cloud, options).score(mesh, pose)
 }
 
 /// The coarse keypoints the exploration runs on and scores its runs with, and the band it
-/// scores in: without the planes too large to be the part's (see [`planes`]) unless the options
-/// keep them.
-fn exploration_scoring(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    options: &PcaOptions,
-) -> (Vec<Point3<f64>>, f64) {
-    let voxel_m = options.voxel_m * 3.0;
-    let coarse = voxel_representatives(cloud, voxel_m);
-    (
-        if options.without_large_planes {
-            without_large_planes(coarse, mesh, voxel_m)
-        } else {
-            coarse
-        },
-        (options.voxel_m * 2.0).max(options.delta_min_m * 0.3),
-    )
+/// scores in, built once per alignment (a voxel grid of the whole cloud and the plane search;
+/// rebuilt for every stage that scored, they were a fifth of a 50 mm alignment's time).
+pub(super) struct Coarse {
+    /// One keypoint per voxel of three times the options' voxel.
+    all: Vec<Point3<f64>>,
+    /// `all` without the planes too large to be the part's (see [`planes`]); `None` when the
+    /// options keep them.
+    without_planes: Option<Vec<Point3<f64>>>,
+    band_m: f64,
+}
+
+impl Coarse {
+    fn new(mesh: &Mesh, cloud: &[Point3<f64>], options: &PcaOptions) -> Self {
+        let voxel_m = options.voxel_m * 3.0;
+        let all = voxel_representatives(cloud, voxel_m);
+        let without_planes = options
+            .without_large_planes
+            .then(|| without_large_planes(all.clone(), mesh, voxel_m));
+        Self {
+            all,
+            without_planes,
+            band_m: (options.voxel_m * 2.0).max(options.delta_min_m * 0.3),
+        }
+    }
+
+    /// The keypoints every score counts (and the runs from a far start follow).
+    fn scored(&self) -> &[Point3<f64>] {
+        self.without_planes.as_deref().unwrap_or(&self.all)
+    }
+
+    /// The score of `pose` (see [`consensus`]).
+    fn score(&self, mesh: &Mesh, pose: &Isometry3<f64>) -> f64 {
+        consensus(mesh, self.scored(), pose, self.band_m)
+    }
 }
 
 struct ScheduleRun {
