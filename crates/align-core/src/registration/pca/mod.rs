@@ -449,7 +449,8 @@ pub fn scan_consensus(
 
 /// The coarse keypoints the exploration runs on and scores its runs with, and the band it
 /// scores in, built once per alignment (a voxel grid of the whole cloud and the plane search;
-/// rebuilt for every stage that scored, they were a fifth of a 50 mm alignment's time).
+/// rebuilt for every stage that scored, they were a fifth to a third of a 50 mm alignment's
+/// time on the CAD scans).
 pub(super) struct Coarse {
     /// One keypoint per voxel of three times the options' voxel.
     all: Vec<Point3<f64>>,
