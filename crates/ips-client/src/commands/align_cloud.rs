@@ -165,6 +165,14 @@ pub fn to_text(report: &CloudReport) -> String {
             found.runner_up_score,
             found.margin * 100.0
         );
+    } else if report.starts > 1 {
+        // Silence here read as "unique"; it means no run ended anywhere else.
+        text += &format!(
+            "uniqueness: no other pose to compare, all {} runs from the start ended at this one\n",
+            report.starts
+        );
+    } else {
+        text += "uniqueness: not tested, a single run (a local alignment, or a delta too small to turn this part and below the global search's)\n";
     }
     for note in &report.notes {
         text += &format!("note: {note}\n");
@@ -238,6 +246,39 @@ mod tests {
         assert_eq!(
             (body.point_to_point, body.cos_squared, body.local),
             (Some(true), Some(true), Some(true))
+        );
+    }
+
+    #[test]
+    fn a_report_without_a_runner_up_says_why_instead_of_nothing() {
+        let report = |starts: usize| protocol::reports::CloudReport {
+            alignment: protocol::reports::AlignmentSummary {
+                pose: protocol::Pose::new([0.1, 0.2, 0.3], [0.0, 0.0, 0.5]),
+                iterations: 12,
+                converged: true,
+                rms: 4e-4,
+                max: 2e-3,
+                time_s: 0.2,
+                residuals: Vec::new(),
+            },
+            cloud_points: 50_000,
+            keypoints: 9_000,
+            kept_points: 800,
+            final_delta: 0.0015,
+            starts,
+            notes: Vec::new(),
+            ambiguous: false,
+            uniqueness: None,
+        };
+        let single = super::to_text(&report(1));
+        assert!(
+            single.contains("uniqueness: not tested, a single run"),
+            "{single}"
+        );
+        let many = super::to_text(&report(49));
+        assert!(
+            many.contains("no other pose to compare, all 49 runs"),
+            "{many}"
         );
     }
 
