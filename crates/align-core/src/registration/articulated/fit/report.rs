@@ -242,7 +242,7 @@ mod tests {
         let links = [visible("block"), visible("flange")];
         let observed =
             |rims| observed_parameters(&body, &placed, &flange_matches(rims), &links, &options)[0];
-        // Two rim points among 120 move along their normals by 12 mm per radian: an RMS of 2 mm
+        // Two rim points among 122 move along their normals by 12 mm per radian: an RMS of 1.5 mm
         // per radian over the link, above 5 % of its 20 mm reach, yet two points are no
         // evidence of the spin.
         assert!(!observed(0));
