@@ -90,7 +90,8 @@ pub struct AlignRobotOutput {
 pub struct TwinJson {
     pub base_pose: BasePoseJson,
     pub q: Vec<f64>,
-    /// Coarse keypoints it explains, and the fit's.
+    /// Fine keypoints it explains where it and the fit differ (near the links the two place
+    /// apart), and the fit's there.
     pub coverage: i64,
     pub fit_coverage: i64,
 }

@@ -24,11 +24,17 @@
 //!    (`search_passes`).
 //! 4. Half turns: a joint whose window allows it is tried turned by pi with the joints below it
 //!    searched again (a spherical wrist reaches the same poses as (a + pi, -b, c + pi)), and
-//!    kept when the robot then explains more of the scan. A base that is not round about the
-//!    first joint is turned about its axis with that joint turned back (`base_turn_check`):
-//!    the base's turn shows only on the base, and no step leaves it once the base's features
-//!    lie beyond the band.
-//! 5. Last, the same steps on every keypoint against the exact link surfaces.
+//!    kept when the links that joint moves then explain more fine keypoints where the two
+//!    states differ (`contrast_among`); after a round that kept a flip, another round. A base
+//!    that is not round about the first joint is turned about its axis with that joint turned
+//!    back (`base_turn_check`): the base's turn shows only on the base, and no step leaves it
+//!    once the base's features lie beyond the band.
+//! 5. Last, the same steps on every keypoint against the exact link surfaces; then a second
+//!    look (`second_look`) at each joint whose window reaches a quarter turn (after a global
+//!    search, at each joint that spins its own links in place): searched with its child over
+//!    its window from the final state, each candidate refined and kept when it explains
+//!    `min_link_points` more where it differs. The half-turn states that were not kept give
+//!    the `twin`, refined the same way before it is called ambiguous.
 //!
 //! When delta exceeds the robot's radius (at the start joints) the start is not local: the
 //! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
@@ -51,6 +57,7 @@ mod base;
 mod beam;
 mod checks;
 mod context;
+mod contrast;
 mod global_search;
 mod joint_search;
 mod options;
@@ -253,7 +260,7 @@ pub fn align_robot(
             false,
         );
     }
-    let (spent, others_base, others_q) = fit.flip_check(&mut world_from_root, &mut q);
+    let (spent, others) = fit.flip_check(&mut world_from_root, &mut q);
     iterations += spent;
     if round_base.is_none() {
         iterations += fit.base_turn_check(&mut world_from_root, &mut q);
@@ -270,9 +277,7 @@ pub fn align_robot(
         true,
     );
     let mut state = final_state(body, &keypoints, &world_from_root, &q, options);
-    if global {
-        iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
-    }
+    iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
     let report::FinalState {
         matches,
         links,
@@ -284,15 +289,15 @@ pub fn align_robot(
         }
     }
     // A joint the scan does not show is not what tells a twin apart.
-    let mut others_q = others_q;
-    for other in &mut others_q {
+    let mut others = others;
+    for (_, other) in &mut others {
         for (parameter, seen) in observed.iter().enumerate() {
             if !seen {
                 other[parameter] = q0[parameter];
             }
         }
     }
-    let twin = fit.twin(&world_from_root, &q, &others_base, &others_q);
+    let twin = fit.twin(&world_from_root, &q, &others, &observed);
     let with_base = round_base
         .and(search_order(body).first().copied())
         .filter(|&first| observed[first]);

@@ -35,7 +35,8 @@ pub struct JointFit {
 pub struct RobotTwin {
     pub world_from_root: Isometry3<f64>,
     pub q: Vec<f64>,
-    /// Coarse keypoints it explains within the narrowest band, and the fit's.
+    /// Fine keypoints it explains where it and the fit differ (near the links the two place
+    /// apart, within half a keypoint voxel), and the fit's there.
     pub coverage: i64,
     pub fit_coverage: i64,
     /// The scan cannot tell the fit from the twin: the fit explains fewer than
