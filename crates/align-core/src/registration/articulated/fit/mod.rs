@@ -29,9 +29,10 @@
 //!    that is not round about the first joint is turned about its axis with that joint turned
 //!    back (`base_turn_check`): the base's turn shows only on the base, and no step leaves it
 //!    once the base's features lie beyond the band.
-//! 5. Last, the same steps on every keypoint against the exact link surfaces; then a second
-//!    look (`second_look`) at each joint whose window reaches a quarter turn (after a global
-//!    search, at each joint that spins its own links in place): searched with its child over
+//! 5. Last, the same steps on every keypoint against the exact link surfaces; then, when delta
+//!    exceeds 0.4 times the robot's radius, a second look (`second_look`) at each joint whose
+//!    window reaches a quarter turn (after a global search, at each joint that spins its own
+//!    links in place): searched with its child over
 //!    its window from the final state, each candidate refined and kept when it explains
 //!    `min_link_points` more where it differs. The half-turn states that were not kept give
 //!    the `twin`, refined the same way before it is called ambiguous.
@@ -277,7 +278,15 @@ pub fn align_robot(
         true,
     );
     let mut state = final_state(body, &keypoints, &world_from_root, &q, options);
-    iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
+    // Below a fraction of the robot's radius the searches from the start settle every joint in
+    // its basin (every trial measured): the look would only cost time there.
+    let look_again = global
+        || start_mesh
+            .as_ref()
+            .is_some_and(|mesh| delta_m > SECOND_LOOK_DELTA_PER_RADIUS * mesh.radius_m());
+    if look_again {
+        iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
+    }
     let report::FinalState {
         matches,
         links,
@@ -343,3 +352,9 @@ fn is_global(robot_at_start: &Mesh, delta_m: f64) -> bool {
 /// The start is taken as not local when delta exceeds this fraction of the robot's radius at
 /// the start joints (see [`align_robot`]): turns of the whole robot by more than a radian.
 const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;
+
+/// A local fit takes a second look at its wide-window joints (see `second_look`) when delta
+/// exceeds this fraction of the robot's radius at the start joints. The ABB IRB 1600 at 500 mm
+/// (radius 1.0 m) needed it in 3 of 10 trials; at 100 mm it cost the UR10 10-15% of its fit
+/// (`articulated_starts` bench) for nothing, and no trial at 200 mm needed it.
+const SECOND_LOOK_DELTA_PER_RADIUS: f64 = 0.4;
