@@ -260,19 +260,20 @@ impl FitContext<'_> {
         } = *self;
         let fit = (world_from_root, q);
         let margin = i64::try_from(options.min_link_points).unwrap_or(i64::MAX);
-        let mut scored: Vec<(i64, i64, Isometry3<f64>, Vec<f64>)> = others
+        // (the fit's count, the other's) where they differ; `None` once refined into the fit.
+        let mut scored: Vec<_> = others
             .iter()
             .filter_map(|(base, other_q)| {
-                let (fit_coverage, coverage) = self.contrast(fit, (base, other_q))?;
-                Some((fit_coverage, coverage, *base, other_q.clone()))
+                let counts = self.contrast(fit, (base, other_q))?;
+                Some((Some(counts), *base, other_q.clone()))
             })
             .collect();
-        scored.sort_by_key(|(fit_coverage, coverage, ..)| fit_coverage - coverage);
-        for (refined, entry) in scored.iter_mut().enumerate() {
-            if entry.0 - entry.1 >= margin || refined == TWINS_REFINED {
+        let lead = |counts: &Option<(i64, i64)>| counts.map(|(fit, other)| fit - other);
+        scored.sort_by_key(|(counts, ..)| lead(counts));
+        for (refined, (counts, base, other_q)) in scored.iter_mut().enumerate() {
+            if lead(counts).is_none_or(|lead| lead >= margin) || refined == TWINS_REFINED {
                 break;
             }
-            let (_, _, base, other_q) = entry;
             let unrefined = other_q.clone();
             refine(
                 body,
@@ -288,15 +289,12 @@ impl FitContext<'_> {
                     *value = *before;
                 }
             }
-            // Refined into the fit's own pose: no other pose (kept last, never picked).
-            (entry.0, entry.1) = self
-                .contrast(fit, (&entry.2, &entry.3))
-                .unwrap_or((i64::MAX, i64::MIN));
+            *counts = self.contrast(fit, (base, other_q));
         }
-        let (fit_coverage, coverage, base, other_q) = scored
+        let ((fit_coverage, coverage), base, other_q) = scored
             .into_iter()
-            .filter(|(_, coverage, ..)| *coverage != i64::MIN)
-            .min_by_key(|(fit_coverage, coverage, ..)| fit_coverage - coverage)?;
+            .filter_map(|(counts, base, other_q)| Some((counts?, base, other_q)))
+            .min_by_key(|((fit, other), ..)| fit - other)?;
         Some(RobotTwin {
             world_from_root: base,
             q: other_q,
