@@ -325,9 +325,36 @@ fn keyed_wrist_urdf(key_size_m: f64) -> String {
     )
 }
 
+/// The robot of [`keyed_wrist_urdf`] scanned at `truth` with joints `q_true`, and a fit
+/// context (delta 0.5 m) on the scan's keypoints for `run`.
+fn with_keyed_wrist_scan<R>(
+    key_size_m: f64,
+    truth: &Isometry3<f64>,
+    q_true: &[f64],
+    global: bool,
+    run: impl FnOnce(&FitContext) -> R,
+) -> R {
+    let options = RobotFitOptions::default();
+    let urdf = keyed_wrist_urdf(key_size_m);
+    let model = RobotModel::from_urdf_str(&urdf, &PackageMap::new()).unwrap();
+    let body = ArticulatedBody::from_model(&model).unwrap();
+    let cloud = scan_robot(&body, truth, q_true, &RobotScanOptions::default());
+    let fine = voxel_representatives(&cloud, options.voxel_m);
+    let coarse = voxel_representatives(&cloud, options.voxel_m * 3.0);
+    run(&FitContext {
+        body: &body,
+        scan: Keypoints {
+            coarse: &coarse,
+            fine: &fine,
+        },
+        delta_m: 0.5,
+        global,
+        options: &options,
+    })
+}
+
 #[test]
 fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart() {
-    let options = RobotFitOptions::default();
     let truth = Isometry3::translation(0.2, -0.1, 0.0);
     let q_true = vec![0.0, 0.3, 0.4, 0.2, 0.6, 0.3];
     let mut twin_q = q_true.clone();
@@ -335,56 +362,44 @@ fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart()
     twin_q[4] = -twin_q[4];
     twin_q[5] -= std::f64::consts::PI;
     let twin_of = |key_size_m: f64| {
-        let urdf = keyed_wrist_urdf(key_size_m);
-        let model = RobotModel::from_urdf_str(&urdf, &PackageMap::new()).unwrap();
-        let body = ArticulatedBody::from_model(&model).unwrap();
-        let flange = body
-            .links()
-            .iter()
-            .position(|l| l.name == "flange")
-            .unwrap();
-        let (at_fit, at_twin) = (
-            body.link_poses(&truth, &q_true),
-            body.link_poses(&truth, &twin_q),
-        );
-        let mesh = body.links()[flange].surface.as_ref().unwrap();
-        assert!(mesh.deviation_m(&at_fit[flange], &at_twin[flange]) < 1e-6);
-        let cloud = scan_robot(&body, &truth, &q_true, &RobotScanOptions::default());
-        let fine = voxel_representatives(&cloud, options.voxel_m);
-        let coarse = voxel_representatives(&cloud, options.voxel_m * 3.0);
-        let fit = FitContext {
-            body: &body,
-            scan: Keypoints {
-                coarse: &coarse,
-                fine: &fine,
-            },
-            delta_m: 0.5,
-            global: true,
-            options: &options,
-        };
-        let observed = vec![true; q_true.len()];
-        // The state it started from, identical to the fit, is no twin.
-        assert_eq!(
-            fit.twin(&truth, &q_true, &[(truth, q_true.clone())], &observed),
-            None
-        );
-        // Nor is a copy a few millimetres off, which a refinement takes back to the fit: scored
-        // as it is, it explains nearly as much and would be called ambiguous.
-        let mut near_q = q_true.clone();
-        near_q[2] += 0.004;
-        let (fit_there, near_there) = fit.contrast((&truth, &q_true), (&truth, &near_q)).unwrap();
-        assert!(fit_there - near_there < 12, "{fit_there} {near_there}");
-        assert_eq!(
-            fit.twin(&truth, &q_true, &[(truth, near_q)], &observed),
-            None
-        );
-        fit.twin(
-            &truth,
-            &q_true,
-            &[(truth, q_true.clone()), (truth, twin_q.clone())],
-            &observed,
-        )
-        .unwrap()
+        with_keyed_wrist_scan(key_size_m, &truth, &q_true, true, |fit| {
+            let body = fit.body;
+            let flange = body
+                .links()
+                .iter()
+                .position(|l| l.name == "flange")
+                .unwrap();
+            let (at_fit, at_twin) = (
+                body.link_poses(&truth, &q_true),
+                body.link_poses(&truth, &twin_q),
+            );
+            let mesh = body.links()[flange].surface.as_ref().unwrap();
+            assert!(mesh.deviation_m(&at_fit[flange], &at_twin[flange]) < 1e-6);
+            let observed = vec![true; q_true.len()];
+            // The state it started from, identical to the fit, is no twin.
+            assert_eq!(
+                fit.twin(&truth, &q_true, &[(truth, q_true.clone())], &observed),
+                None
+            );
+            // Nor is a copy a few millimetres off, which a refinement takes back to the fit: scored
+            // as it is, it explains nearly as much and would be called ambiguous.
+            let mut near_q = q_true.clone();
+            near_q[2] += 0.004;
+            let (fit_there, near_there) =
+                fit.contrast((&truth, &q_true), (&truth, &near_q)).unwrap();
+            assert!(fit_there - near_there < 12, "{fit_there} {near_there}");
+            assert_eq!(
+                fit.twin(&truth, &q_true, &[(truth, near_q)], &observed),
+                None
+            );
+            fit.twin(
+                &truth,
+                &q_true,
+                &[(truth, q_true.clone()), (truth, twin_q.clone())],
+                &observed,
+            )
+            .unwrap()
+        })
     };
     // A 6 mm key: a keypoint or two the twin does not explain.
     let small = twin_of(0.006);
@@ -401,47 +416,32 @@ fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart()
 /// link that differs, the base's points carry the flip whichever way the wrist goes.
 #[test]
 fn a_flip_is_judged_on_the_links_its_joint_moves() {
-    let options = RobotFitOptions::default();
-    let urdf = keyed_wrist_urdf(0.06);
-    let model = RobotModel::from_urdf_str(&urdf, &PackageMap::new()).unwrap();
-    let body = ArticulatedBody::from_model(&model).unwrap();
     let truth = Isometry3::translation(0.2, -0.1, 0.0);
     let q_true = vec![0.0, 0.3, 0.4, 0.2, 0.6, 0.3];
-    let cloud = scan_robot(&body, &truth, &q_true, &RobotScanOptions::default());
-    let fine = voxel_representatives(&cloud, options.voxel_m);
-    let coarse = voxel_representatives(&cloud, options.voxel_m * 3.0);
-    let fit = FitContext {
-        body: &body,
-        scan: Keypoints {
-            coarse: &coarse,
-            fine: &fine,
-        },
-        delta_m: 0.5,
-        global: false,
-        options: &options,
-    };
-    // The true wrist on a base turned 0.1 rad about joint 1's axis (the root's z), joint 1
-    // turned back: every link but the base where it truly is.
-    let turned_base = truth * UnitQuaternion::from_euler_angles(0.0, 0.0, 0.1);
-    let mut q_turned = q_true.clone();
-    q_turned[0] -= 0.1;
-    assert_eq!(
-        fit.differing_links((&truth, &q_true), (&turned_base, &q_turned)),
-        vec![0]
-    );
-    // The wrist's twin on the true base.
-    let mut twin_q = q_true.clone();
-    twin_q[3] += std::f64::consts::PI;
-    twin_q[4] = -twin_q[4];
-    twin_q[5] -= std::f64::consts::PI;
-    let now = (&turned_base, q_turned.as_slice());
-    let flipped = (&truth, twin_q.as_slice());
-    let (on_all_now, on_all_flipped) = fit.contrast(now, flipped).unwrap();
-    assert!(on_all_flipped > on_all_now, "{on_all_now} {on_all_flipped}");
-    let wrist_links = body.moved_by(3);
-    let (now_score, flipped_score) = fit.contrast_among(now, flipped, &wrist_links).unwrap();
-    assert!(
-        now_score > flipped_score + 12,
-        "{now_score} {flipped_score}"
-    );
+    with_keyed_wrist_scan(0.06, &truth, &q_true, false, |fit| {
+        // The true wrist on a base turned 0.1 rad about joint 1's axis (the root's z), joint 1
+        // turned back: every link but the base where it truly is.
+        let turned_base = truth * UnitQuaternion::from_euler_angles(0.0, 0.0, 0.1);
+        let mut q_turned = q_true.clone();
+        q_turned[0] -= 0.1;
+        assert_eq!(
+            fit.differing_links((&truth, &q_true), (&turned_base, &q_turned)),
+            vec![0]
+        );
+        // The wrist's twin on the true base.
+        let mut twin_q = q_true.clone();
+        twin_q[3] += std::f64::consts::PI;
+        twin_q[4] = -twin_q[4];
+        twin_q[5] -= std::f64::consts::PI;
+        let now = (&turned_base, q_turned.as_slice());
+        let flipped = (&truth, twin_q.as_slice());
+        let (on_all_now, on_all_flipped) = fit.contrast(now, flipped).unwrap();
+        assert!(on_all_flipped > on_all_now, "{on_all_now} {on_all_flipped}");
+        let wrist_links = fit.body.moved_by(3);
+        let (now_score, flipped_score) = fit.contrast_among(now, flipped, &wrist_links).unwrap();
+        assert!(
+            now_score > flipped_score + 12,
+            "{now_score} {flipped_score}"
+        );
+    });
 }
