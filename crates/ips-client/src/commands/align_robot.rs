@@ -218,7 +218,7 @@ impl AlignRobotOutput {
         if let (true, Some(twin)) = (self.ambiguous, &self.twin) {
             let q: Vec<String> = twin.q.iter().map(|v| format!("{v:.4}")).collect();
             text += &format!(
-                "AMBIGUOUS: another pose explains the scan as well ({} keypoints against {}): joints [{}]; a joint reading or a touch tells them apart\n",
+                "AMBIGUOUS: another pose explains the scan as well ({} keypoints against {} where the two differ): joints [{}]; a joint reading or a touch tells them apart\n",
                 twin.coverage,
                 twin.fit_coverage,
                 q.join(", ")
