@@ -46,10 +46,9 @@ fn sampled_deviation_m(mesh: &Mesh, a: &Isometry3<f64>, b: &Isometry3<f64>) -> f
 }
 
 impl FitContext<'_> {
-    /// The links with a surface that `a` and `b` place more than [`DISTINCT_M`] apart.
-    pub(super) fn differing_links(&self, a: State, b: State) -> Vec<usize> {
-        let all: Vec<usize> = (0..self.body.links().len()).collect();
-        self.deviations_m(a, b, &all)
+    /// Those of `among` with a surface that `a` and `b` place more than [`DISTINCT_M`] apart.
+    pub(super) fn differing_links(&self, a: State, b: State, among: &[usize]) -> Vec<usize> {
+        self.deviations_m(a, b, among)
             .into_iter()
             .filter(|&(_, deviation_m)| deviation_m > DISTINCT_M)
             .map(|(link, _)| link)
@@ -89,11 +88,7 @@ impl FitContext<'_> {
             options,
             ..
         } = *self;
-        let differing: Vec<usize> = self
-            .differing_links(a, b)
-            .into_iter()
-            .filter(|link| among.contains(link))
-            .collect();
+        let differing = self.differing_links(a, b, among);
         if differing.is_empty() {
             return None;
         }

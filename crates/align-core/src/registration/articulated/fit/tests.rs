@@ -425,7 +425,11 @@ fn a_flip_is_judged_on_the_links_its_joint_moves() {
         let mut q_turned = q_true.clone();
         q_turned[0] -= 0.1;
         assert_eq!(
-            fit.differing_links((&truth, &q_true), (&turned_base, &q_turned)),
+            fit.differing_links(
+                (&truth, &q_true),
+                (&turned_base, &q_turned),
+                &(0..fit.body.links().len()).collect::<Vec<_>>()
+            ),
             vec![0]
         );
         // The wrist's twin on the true base.
