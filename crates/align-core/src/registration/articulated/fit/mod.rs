@@ -32,10 +32,10 @@
 //! 5. Last, the same steps on every keypoint against the exact link surfaces; then, when delta
 //!    exceeds 0.4 times the robot's radius, a second look (`second_look`) at each joint whose
 //!    window reaches a quarter turn (after a global search, at each joint that spins its own
-//!    links in place): searched with its child over
-//!    its window from the final state, each candidate refined and kept when it explains
-//!    `min_link_points` more where it differs. The half-turn states that were not kept give
-//!    the `twin`, refined the same way before it is called ambiguous.
+//!    links in place): searched with its child over its window from the final state, each
+//!    candidate refined and kept when it explains `min_link_points` more where it differs. The
+//!    half-turn states that were not kept give the `twin`, refined the same way before it is
+//!    called ambiguous.
 //!
 //! When delta exceeds the robot's radius (at the start joints) the start is not local: the
 //! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
