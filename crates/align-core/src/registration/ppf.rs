@@ -322,38 +322,53 @@ pub fn ppf_poses_where(
                         .map(|key| (key, scene[i].point))
                 })
                 .collect();
-            let (table, frames, model_samples) = (&table, &frames, model.len());
-            [1.0, -1.0].into_iter().filter_map(move |sign| {
-                let reference = Oriented {
+            // Both signs vote in one pass over the pairs' table entries (the entries are the
+            // same; only the scene's turn differs): each accumulator gets the increments it got
+            // in a pass of its own, in the same order.
+            let frames_by_sign = [1.0, -1.0].map(|sign| {
+                reference_frame(&Oriented {
                     point: reference.point,
                     normal: reference.normal * sign,
-                };
-                let frame = reference_frame(&reference);
-                let mut accumulator = vec![0u16; model_samples * turn_bins];
-                for (key, point) in &pairs {
-                    let scene_turn = turn_of(&frame, point);
-                    for &(model_reference, model_turn) in &table[*key] {
-                        let turn = wrap_turn(scene_turn - f64::from(model_turn));
+                })
+            });
+            let slots = model.len() * turn_bins;
+            let mut accumulators = vec![0u32; 2 * slots];
+            let (plus, minus) = accumulators.split_at_mut(slots);
+            for (key, point) in &pairs {
+                let scene_turns = frames_by_sign.map(|frame| turn_of(&frame, point));
+                for &(model_reference, model_turn) in &table[*key] {
+                    let model_turn = f64::from(model_turn);
+                    let row = model_reference as usize * turn_bins;
+                    for (accumulator, scene_turn) in
+                        [&mut *plus, &mut *minus].into_iter().zip(scene_turns)
+                    {
+                        let turn = wrap_turn(scene_turn - model_turn);
                         let bin = ((turn / turn_step) as usize).min(turn_bins - 1);
-                        let slot = &mut accumulator[model_reference as usize * turn_bins + bin];
-                        *slot = slot.saturating_add(1);
+                        let slot = &mut accumulator[row + bin];
+                        *slot += 1;
                     }
                 }
-                let (best, &count) = accumulator
-                    .iter()
-                    .enumerate()
-                    .max_by_key(|(slot, count)| (**count, std::cmp::Reverse(*slot)))?;
-                if count == 0 {
-                    return None;
-                }
-                let (model_reference, bin) = (best / turn_bins, best % turn_bins);
-                let turn = (bin as f64 + 0.5) * turn_step;
-                let pose = frame.inverse()
-                    * Isometry3::rotation(Vector3::x() * turn)
-                    * frames[model_reference];
-                ((pose * Point3::origin() - centre).norm() <= radius_m && allowed(&pose))
-                    .then_some((count as usize, pose))
-            })
+            }
+            accumulators
+                .chunks_exact(slots)
+                .zip(frames_by_sign)
+                .filter_map(|(accumulator, frame)| {
+                    let (best, &count) = accumulator
+                        .iter()
+                        .enumerate()
+                        .max_by_key(|(slot, count)| (**count, std::cmp::Reverse(*slot)))?;
+                    if count == 0 {
+                        return None;
+                    }
+                    let (model_reference, bin) = (best / turn_bins, best % turn_bins);
+                    let turn = (bin as f64 + 0.5) * turn_step;
+                    let pose = frame.inverse()
+                        * Isometry3::rotation(Vector3::x() * turn)
+                        * frames[model_reference];
+                    ((pose * Point3::origin() - centre).norm() <= radius_m && allowed(&pose))
+                        .then_some((count as usize, pose))
+                })
+                .collect::<Vec<_>>()
         })
         .collect();
     votes.sort_by_key(|v| std::cmp::Reverse(v.0));
