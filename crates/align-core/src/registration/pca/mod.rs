@@ -86,6 +86,12 @@ pub struct PcaOptions {
     /// its score does not count them. Off: the floor counts as any clutter does, as the robot
     /// fit's rigid stages were measured.
     pub without_large_planes: bool,
+    /// After the run from the best start, runs from the found pose turned every way the delta
+    /// allows: they reach a symmetric part's twin (for the uniqueness margin) and a better pose
+    /// the exploration from the start missed. Off: no uniqueness is reported and the runs are
+    /// saved, for a caller that only needs the pose brought near and tells twins apart itself
+    /// (the robot fit's rigid stage of the whole robot).
+    pub twin_search: bool,
 }
 
 impl Default for PcaOptions {
@@ -109,6 +115,7 @@ impl Default for PcaOptions {
             wide_exploration: true,
             polish: true,
             without_large_planes: true,
+            twin_search: true,
         }
     }
 }
@@ -320,7 +327,7 @@ pub fn align_cloud(
     }
     let mut run = run_schedule(mesh, &keypoints, &start, schedule_from, options, 1.0);
     let mut uniqueness_found = None;
-    if let Some(coarse) = &coarse {
+    if let Some(coarse) = coarse.as_ref().filter(|_| options.twin_search) {
         // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
         // other pose) that no run from the start reached shows up here, and so does a better
         // pose the exploration from the start missed. A twin turned about the part's centre

@@ -69,6 +69,10 @@ impl Default for RobotFitOptions {
                 // Bringing the base near is all this stage is for; the joint refinement ends it.
                 polish: false,
                 without_large_planes: false,
+                // The fit's half-turn check and second look tell the robot's twins apart; the
+                // runs about the found pose were a third of a 100 mm fit's rigid stage
+                // (docs/BENCHMARKS.md) and changed no fit of the bench's 40.
+                twin_search: false,
                 ..PcaOptions::default()
             },
             // The proximal links are small: 15 mm keypoints (45 mm for the exploration's and the
