@@ -31,8 +31,8 @@
 //!    once the base's features lie beyond the band.
 //! 5. Last, the same steps on every keypoint against the exact link surfaces; then, when delta
 //!    exceeds 0.4 times the robot's radius, a second look (`second_look`) at each joint whose
-//!    window reaches a quarter turn (after a global search, at each joint that spins its own
-//!    links in place): searched with its child over its window from the final state, each
+//!    window reaches a quarter turn (after a global search also at each joint that spins its
+//!    own links in place): searched with its child over its window from the final state, each
 //!    candidate refined and kept when it explains `min_link_points` more where it differs. The
 //!    half-turn states that were not kept give the `twin`, refined the same way before it is
 //!    called ambiguous.
