@@ -58,7 +58,7 @@ impl FitContext<'_> {
                 &(world_from_root_start * Point3::origin()),
                 root_bound_m,
                 &options.detection,
-                options.base_candidates,
+                options.detected_bases,
                 DISTINCT_DETECTION_RAD,
             )
             .into_iter()

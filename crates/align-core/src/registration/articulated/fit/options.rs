@@ -19,8 +19,14 @@ pub struct RobotFitOptions {
     /// States the first search down the tree keeps at each joint.
     pub beam_width: usize,
     /// Further base poses the search starts from when the start may be off by about as much as
-    /// the base is big: rigid alignments of the base and the links only the first joint moves.
+    /// the base is big: rigid alignments of the base and the links only the first joint moves
+    /// (0: none, detected ones included).
     pub base_candidates: usize,
+    /// Base poses the detection of the proximal links gives when the start is not local (delta
+    /// beyond the robot's radius). Point pair features can rank the true place of a boxy base
+    /// below others: on the ABB IRB 1600 at 1000 mm it was the sixth of twelve in a trial that
+    /// four lost (docs/articulated-trials.md).
+    pub detected_bases: usize,
     pub max_iterations: usize,
     /// The refinement stops when a step moves the points along their normals by less than this
     /// (RMS), m.
@@ -47,6 +53,7 @@ impl Default for RobotFitOptions {
             search_passes: 2,
             beam_width: 6,
             base_candidates: 4,
+            detected_bases: 12,
             // The last refinement starts within the narrow band and takes a handful when the
             // correspondences settle; should they cycle (points switching between links at the
             // 0.1 mm level), it keeps the best of 25.
