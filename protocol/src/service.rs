@@ -125,9 +125,14 @@ pub struct AlignCloudRequest {
     /// The thesis's SVD step instead of point-to-plane (default false).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub point_to_point: Option<bool>,
-    /// Delta shrinks as cos^2 (the thesis's code) instead of cos (its eq. 33) (default false).
+    /// Delta shrinks as cos^2 over 100 iterations (the thesis's code) instead of halving each
+    /// time the pose settles (default false).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cos_squared: Option<bool>,
+    /// Delta shrinks as cos over 100 iterations (the thesis's eq. 33) instead of halving each
+    /// time the pose settles (default false; not with `cos_squared`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cosine: Option<bool>,
     /// No exploration of orientations around the start pose, the thesis's behaviour (default
     /// false).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -5,8 +5,10 @@ use serde::Serialize;
 
 use crate::trials::{Outcome, Trial};
 
-/// The methods in the table's column order: ips first, then the peers that ran.
+/// The methods in the table's column order: ips first, then ips's local stage alone (when
+/// asked for), then the peers that ran.
 pub const IPS: &str = "ips";
+pub const IPS_LOCAL: &str = "ips_local";
 
 /// One trial's outcome per method, in `methods` order (`None`: the method did not run).
 #[derive(Debug, Clone)]
@@ -173,6 +175,7 @@ fn column_title(method: &str) -> &str {
     match method {
         "open3d" => "Open3D point-to-plane, coarse-to-fine, Tukey",
         "small_gicp" => "small_gicp GICP, coarse-to-fine",
+        IPS_LOCAL => "ips local stage only (--local)",
         other => other,
     }
 }

@@ -183,8 +183,10 @@ impl Outcome {
 }
 
 /// ips on one trial's files, exactly as `ips align-cloud --cloud C --mesh M --pose P --delta D`
-/// runs it (point-to-plane, cos schedule, the exploration on).
-pub fn run_ips(trial: &Trial) -> Outcome {
+/// runs it (point-to-plane, cos schedule, the exploration on); with `local`, as
+/// `ips align-cloud --local` runs it: the local stage alone (the schedule from the start and the
+/// polish), the class of method the peers are.
+pub fn run_ips(trial: &Trial, local: bool) -> Outcome {
     let job = CloudAlignment {
         cloud: trial.files.cloud.clone(),
         cloud_scale: 1.0,
@@ -192,7 +194,7 @@ pub fn run_ips(trial: &Trial) -> Outcome {
         mesh_scale: 1.0,
         base_from_part_start: trial.start,
         delta_m: trial.delta_m,
-        options: cloud_options(false, false, false),
+        options: cloud_options(false, None, local),
     };
     match align(&job) {
         Ok(report) => {

@@ -33,7 +33,7 @@ fn trials_at(delta_mm: f64) -> Vec<(Trial, Outcome)> {
     corpus()
         .iter()
         .filter(|t| (t.delta_m * 1e3 - delta_mm).abs() < 1e-9)
-        .map(|trial| (trial.clone(), run_ips(trial)))
+        .map(|trial| (trial.clone(), run_ips(trial, false)))
         .collect()
 }
 

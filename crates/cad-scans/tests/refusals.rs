@@ -40,7 +40,7 @@ fn a_cylinder_spun_about_its_axis_fits_the_scan_as_well_and_ips_says_ambiguous()
     let mut ambiguous = 0;
     for seed in [1, 2, 3] {
         let trial = prepare_trial(seed as usize, &part, seed, 0.05, &options).unwrap();
-        let outcome: Outcome = run_ips(&trial);
+        let outcome: Outcome = run_ips(&trial, false);
         assert!(outcome.refused.is_none(), "{:?}", outcome.refused);
         ambiguous += usize::from(outcome.ambiguous);
     }
@@ -61,7 +61,7 @@ fn cube_job(name: &str, cloud: &[Point3<f64>]) -> CloudAlignment {
         mesh_scale: 1.0,
         base_from_part_start: Isometry3::translation(0.003, -0.002, 0.001),
         delta_m: 0.05,
-        options: cloud_options(false, false, false),
+        options: cloud_options(false, None, false),
     }
 }
 

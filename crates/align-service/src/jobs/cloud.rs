@@ -67,7 +67,11 @@ pub fn from_request(
         delta_m,
         options: cloud_options(
             body.point_to_point.unwrap_or(false),
-            body.cos_squared.unwrap_or(false),
+            chosen_schedule(
+                body.cos_squared.unwrap_or(false),
+                body.cosine.unwrap_or(false),
+                ("cos_squared", "cosine"),
+            )?,
             body.local.unwrap_or(false),
         ),
     })
@@ -84,7 +88,28 @@ pub fn check_delta(delta_m: f64, what: &str) -> Result<(), BadInput> {
     }
 }
 
-pub fn cloud_options(point_to_point: bool, cos_squared: bool, local: bool) -> PcaOptions {
+/// The schedule two choices ask for (`None`: the default), named in an error as `names` are.
+pub fn chosen_schedule(
+    cos_squared: bool,
+    cosine: bool,
+    names: (&str, &str),
+) -> Result<Option<DeltaSchedule>, BadInput> {
+    match (cos_squared, cosine) {
+        (true, true) => Err(BadInput(format!(
+            "{} and {} are two schedules: pick one",
+            names.0, names.1
+        ))),
+        (true, false) => Ok(Some(DeltaSchedule::CosineSquared)),
+        (false, true) => Ok(Some(DeltaSchedule::Cosine)),
+        (false, false) => Ok(None),
+    }
+}
+
+pub fn cloud_options(
+    point_to_point: bool,
+    schedule: Option<DeltaSchedule>,
+    local: bool,
+) -> PcaOptions {
     let defaults = PcaOptions::default();
     PcaOptions {
         step: if point_to_point {
@@ -92,11 +117,7 @@ pub fn cloud_options(point_to_point: bool, cos_squared: bool, local: bool) -> Pc
         } else {
             PcaStep::PointToPlane
         },
-        schedule: if cos_squared {
-            DeltaSchedule::CosineSquared
-        } else {
-            DeltaSchedule::Cosine
-        },
+        schedule: schedule.unwrap_or(defaults.schedule),
         starts: if local { 0 } else { defaults.starts },
         ..defaults
     }
@@ -134,4 +155,26 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
             runner_up: report_pose(&u.runner_up),
         }),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_schedule_choice_reaches_the_options_and_two_at_once_are_refused() {
+        let schedule = |cos_squared, cosine| {
+            chosen_schedule(cos_squared, cosine, ("cos_squared", "cosine"))
+                .map(|choice| cloud_options(false, choice, false).schedule)
+        };
+        assert_eq!(schedule(false, false), Ok(PcaOptions::default().schedule));
+        assert_eq!(schedule(true, false), Ok(DeltaSchedule::CosineSquared));
+        assert_eq!(schedule(false, true), Ok(DeltaSchedule::Cosine));
+        let refused = schedule(true, true).unwrap_err();
+        assert!(
+            refused.0.contains("cos_squared and cosine"),
+            "{}",
+            refused.0
+        );
+    }
 }

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use cad_scans::peers::{PEERS, default_script, run_peers};
 use cad_scans::scanner::ScanNoise;
 use cad_scans::scenes::{DEFAULT_ABB_DIR, Part, parts_in, shipped_parts};
-use cad_scans::table::{IPS, Scored, markdown, records, rows};
+use cad_scans::table::{IPS, IPS_LOCAL, Scored, markdown, records, rows};
 use cad_scans::trials::{CorpusOptions, Trial, prepare_trials, run_ips, write_manifest};
 use clap::Parser;
 
@@ -20,6 +20,12 @@ use clap::Parser;
 /// IRB 1600 links read from --abb-dir when that folder exists. Peers: run
 /// scripts/peer-env.sh once (it installs Open3D and small_gicp in .venv), or pass --no-peers.
 /// Progress goes to stderr; the table (or --json) to stdout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum IpsMode {
+    Full,
+    Local,
+}
+
 #[derive(Debug, Parser)]
 #[command(name = "cad-scans", version)]
 struct Args {
@@ -54,6 +60,11 @@ struct Args {
     /// Threads each peer may use (ips uses rayon's default, all cores).
     #[arg(long, default_value_t = 2)]
     peer_threads: usize,
+    /// How ips runs, each a column of its own: `full` as `ips align-cloud` (the exploration and
+    /// the uniqueness test), `local` as `ips align-cloud --local` (the schedule from the start
+    /// and the polish only: the same class of method as the peers), or both (`full,local`).
+    #[arg(long, value_delimiter = ',', default_value = "full")]
+    ips: Vec<IpsMode>,
     /// Only ips: no Python.
     #[arg(long)]
     no_peers: bool,
@@ -117,27 +128,42 @@ fn run(args: &Args) -> Result<String, String> {
     })
     .map_err(|e| e.to_string())?;
     eprintln!();
-    let mut methods = vec![IPS.to_owned()];
+    let mut local_runs: Vec<bool> = Vec::new();
+    for mode in &args.ips {
+        let local = *mode == IpsMode::Local;
+        if !local_runs.contains(&local) {
+            local_runs.push(local);
+        }
+    }
+    let mut methods: Vec<String> = local_runs
+        .iter()
+        .map(|&local| if local { IPS_LOCAL } else { IPS }.to_owned())
+        .collect();
     let mut outcomes: Vec<Vec<Option<cad_scans::trials::Outcome>>> = Vec::new();
     for (index, trial) in trials.iter().enumerate() {
-        let outcome = run_ips(trial);
-        // One line a trial: a long run's results can be read before its table.
-        eprintln!(
-            "cad-scans: ips {}/{}: {} at {:.0} mm: {:.2} mm off in {:.2} s{}{}",
-            index + 1,
-            trials.len(),
-            trial.part,
-            trial.delta_m * 1e3,
-            outcome.error_m(trial) * 1e3,
-            outcome.time_s,
-            if outcome.ambiguous { ", ambiguous" } else { "" },
-            if outcome.refused.is_some() {
-                ", refused"
-            } else {
-                ""
-            },
-        );
-        outcomes.push(vec![Some(outcome)]);
+        let mut row = Vec::new();
+        for &local in &local_runs {
+            let outcome = run_ips(trial, local);
+            // One line a trial: a long run's results can be read before its table.
+            eprintln!(
+                "cad-scans: {} {}/{}: {} at {:.0} mm: {:.2} mm off in {:.2} s{}{}",
+                if local { IPS_LOCAL } else { IPS },
+                index + 1,
+                trials.len(),
+                trial.part,
+                trial.delta_m * 1e3,
+                outcome.error_m(trial) * 1e3,
+                outcome.time_s,
+                if outcome.ambiguous { ", ambiguous" } else { "" },
+                if outcome.refused.is_some() {
+                    ", refused"
+                } else {
+                    ""
+                },
+            );
+            row.push(Some(outcome));
+        }
+        outcomes.push(row);
     }
     if !args.no_peers {
         let manifest = args.out.join("manifest.json");

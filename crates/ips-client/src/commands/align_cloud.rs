@@ -6,7 +6,9 @@
 use std::path::PathBuf;
 
 use align_core::pose::isometry_from_xyz_rpy;
-use align_service::jobs::cloud::{CloudAlignment, align, check_delta, cloud_options};
+use align_service::jobs::cloud::{
+    CloudAlignment, align, check_delta, chosen_schedule, cloud_options,
+};
 use clap::Args;
 use protocol::reports::CloudReport;
 use protocol::{AlignCloudRequest, Pose, ServiceCommand};
@@ -46,10 +48,15 @@ pub struct AlignCloudArgs {
     /// The thesis's SVD step instead of point-to-plane.
     #[arg(long)]
     pub point_to_point: bool,
-    /// Delta shrinks as cos^2 (the thesis's code) instead of cos (its eq. 33).
+    /// Delta shrinks as cos^2 over 100 steps (the thesis's code) instead of halving each time
+    /// the pose settles, coarse to fine (the default).
     #[arg(long)]
     pub cos_squared: bool,
-    /// No exploration of orientations around the nominal pose (the thesis's behaviour).
+    /// Delta shrinks as cos over 100 steps (the thesis's eq. 33) instead of halving.
+    #[arg(long, conflicts_with = "cos_squared")]
+    pub cosine: bool,
+    /// No exploration of orientations around the nominal pose and no uniqueness test: the local
+    /// stage alone, as the thesis aligns (with --cos-squared --point-to-point, its loop).
     #[arg(long)]
     pub local: bool,
     /// Ask the running alignment service at this REP endpoint (e.g. tcp://127.0.0.1:4000) to
@@ -93,7 +100,11 @@ fn run_here(args: &AlignCloudArgs) -> Result<CloudReport, BadInput> {
         mesh_scale: args.mesh_scale.unwrap_or(1.0),
         base_from_part_start: isometry_from_xyz_rpy(start.xyz, start.rpy),
         delta_m,
-        options: cloud_options(args.point_to_point, args.cos_squared, args.local),
+        options: cloud_options(
+            args.point_to_point,
+            chosen_schedule(args.cos_squared, args.cosine, ("--cos-squared", "--cosine"))?,
+            args.local,
+        ),
     })
 }
 
@@ -114,6 +125,7 @@ pub fn service_request(args: &AlignCloudArgs) -> Result<AlignCloudRequest, BadIn
         // Flags left off are left out: the request then reads as the user typed it.
         point_to_point: args.point_to_point.then_some(true),
         cos_squared: args.cos_squared.then_some(true),
+        cosine: args.cosine.then_some(true),
         local: args.local.then_some(true),
     })
 }
@@ -212,8 +224,13 @@ mod tests {
             (None, None, None, None)
         );
         assert_eq!(
-            (body.point_to_point, body.cos_squared, body.local),
-            (None, None, None)
+            (
+                body.point_to_point,
+                body.cos_squared,
+                body.cosine,
+                body.local
+            ),
+            (None, None, None, None)
         );
     }
 

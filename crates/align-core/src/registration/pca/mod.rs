@@ -5,8 +5,10 @@
 //! inside the part's bounding box grown by delta (cut-off filter) and within delta of its surface
 //! (measure filter), weights each by w = cos(d / delta * pi / 2), so that points at the edge of
 //! the search band fade out instead of jumping in and out, and moves the part by a weighted step.
-//! Delta shrinks from the user's bound delta0 to delta_min over 100 iterations, so the search
-//! starts wide and coarse and ends narrow, with the clutter far outside the band.
+//! Delta shrinks from the user's bound delta0 to delta_min (the thesis: over 100 iterations; by
+//! default halving each time the pose settles, the wide bands on coarser keypoints, see
+//! [`DeltaSchedule`]), so the search starts wide and coarse and ends narrow, with the clutter
+//! far outside the band.
 //!
 //! Steps: the thesis's weighted SVD ([`PcaStep::PointToPoint`]), or (default) the weighted
 //! linearised point-to-plane step, which converges in a few iterations once the part is close,
@@ -20,15 +22,17 @@ mod exploration;
 mod matching;
 mod planes;
 mod polish;
+mod schedule;
 
 use self::exploration::{
     EXPLORATION_SLACK, Exploring, detected_starts, explore, explore_turns, is_wide,
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
-use self::matching::{Lookup, Match, NO_HINT, correspond};
+use self::matching::{Lookup, Match, correspond};
 use self::planes::without_large_planes;
 use self::polish::polish;
-use super::convergence::{StopCriterion, pose_distance};
+pub use self::schedule::DeltaSchedule;
+use self::schedule::{ScheduleRun, coarser_levels, run_schedule, run_schedule_on_levels};
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
 use crate::geometry::{Mesh, PrincipalSpread};
@@ -40,21 +44,12 @@ pub enum PcaStep {
     PointToPlane,
 }
 
-/// How delta shrinks over the schedule (thesis eq. 33 and the variant its code used).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum DeltaSchedule {
-    /// delta_i = (delta0 - delta_min) cos(i / n * pi / 2) + delta_min (eq. 33).
-    Cosine,
-    /// delta_i = (delta0 - delta_min) cos^2(i / n * pi / 2) + delta_min: shrinks faster early.
-    CosineSquared,
-}
-
 #[derive(Debug, Clone, PartialEq)]
 pub struct PcaOptions {
     pub step: PcaStep,
     pub schedule: DeltaSchedule,
     pub delta_min_m: f64,
-    /// Iterations over which delta shrinks to `delta_min_m` (thesis: 100).
+    /// Iterations over which a cosine schedule's delta shrinks to `delta_min_m` (thesis: 100).
     pub schedule_iterations: usize,
     pub max_iterations: usize,
     /// Voxel edge of the keypoint downsampling, m.
@@ -98,9 +93,9 @@ impl Default for PcaOptions {
     fn default() -> Self {
         Self {
             step: PcaStep::PointToPlane,
-            // Eq. 33 as printed: the slower early shrinking keeps more of the part's points in
-            // the band while a large initial error is corrected.
-            schedule: DeltaSchedule::Cosine,
+            // Coarse to fine: on the CAD scans the same successes as eq. 33's cosine in about
+            // two thirds of the time (docs/cad-scan-trials.md).
+            schedule: DeltaSchedule::Halving,
             delta_min_m: 0.01,
             schedule_iterations: 100,
             max_iterations: 300,
@@ -229,17 +224,6 @@ pub struct Uniqueness {
 /// of a symmetric part (a quarter or half turn) moves its points by one or two radii.
 const SAME_POSE_FRACTION_OF_RADIUS: f64 = 0.3;
 
-fn delta_at(iteration: usize, delta0: f64, options: &PcaOptions) -> f64 {
-    let delta_min = options.delta_min_m.min(delta0);
-    let fraction = (iteration as f64 / options.schedule_iterations.max(1) as f64).min(1.0);
-    let cos = (fraction * std::f64::consts::FRAC_PI_2).cos();
-    let shape = match options.schedule {
-        DeltaSchedule::Cosine => cos,
-        DeltaSchedule::CosineSquared => cos * cos,
-    };
-    (delta0 - delta_min) * shape + delta_min
-}
-
 /// Aligns the part's mesh to `cloud` (base frame) from `base_from_part_start`, with `delta0_m`
 /// the user's bound on how far the start is from the truth.
 pub fn align_cloud(
@@ -325,7 +309,16 @@ pub fn align_cloud(
         // again would only let the clutter back in.
         schedule_from = delta0_m.min(3.0 * options.delta_min_m);
     }
-    let mut run = run_schedule(mesh, &keypoints, &start, schedule_from, options, 1.0);
+    // The given keypoints as the finest level, voxel 0 so that every band may use them.
+    let coarser = coarser_levels(&keypoints, schedule_from, options);
+    let levels: Vec<(f64, &[Point3<f64>])> = std::iter::once((0.0, keypoints.as_slice()))
+        .chain(
+            coarser
+                .iter()
+                .map(|(voxel_m, points)| (*voxel_m, points.as_slice())),
+        )
+        .collect();
+    let mut run = run_schedule_on_levels(mesh, &levels, &start, schedule_from, options, 1.0);
     let mut uniqueness_found = None;
     if let Some(coarse) = coarse.as_ref().filter(|_| options.twin_search) {
         // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
@@ -361,7 +354,7 @@ pub fn align_cloud(
         if let Some((better_score, better)) = around.first()
             && *better_score > found_score + 2.0 * found_score.max(0.0).sqrt()
         {
-            let again = run_schedule(mesh, &keypoints, better, schedule_from, options, 1.0);
+            let again = run_schedule_on_levels(mesh, &levels, better, schedule_from, options, 1.0);
             if coarse.score(mesh, &again.pose) > found_score {
                 run = again;
             }
@@ -492,147 +485,6 @@ impl Coarse {
     }
 }
 
-struct ScheduleRun {
-    pose: Isometry3<f64>,
-    iterations: usize,
-    converged: bool,
-    delta: f64,
-}
-
-/// One run of the thesis's loop: filters, weights and a step per iteration while delta shrinks.
-fn run_schedule(
-    mesh: &Mesh,
-    keypoints: &[Point3<f64>],
-    start: &Isometry3<f64>,
-    delta0_m: f64,
-    options: &PcaOptions,
-    slack: f64,
-) -> ScheduleRun {
-    let (lower, upper) = mesh.bounds();
-    let lookup = Lookup {
-        slack,
-        ..Lookup::exact(options.parallel)
-    };
-    let mut hints = if slack > 1.0 {
-        vec![NO_HINT; keypoints.len()]
-    } else {
-        Vec::new()
-    };
-    let mut reachable = Reachable::new(&lower, &upper, delta0_m);
-    let radius_m = mesh.radius_m();
-    let mut pose = *start;
-    let mut stop = StopCriterion::new(options.window, options.tolerance_m, radius_m);
-    stop.update(&pose);
-    let mut iterations = 0;
-    let mut converged = false;
-    let mut delta = delta0_m;
-    // Schedule position: normally the iteration count; it jumps to the end once the part has
-    // stopped moving, since the slow shrinking only exists to keep the part's points in the
-    // band while it still moves.
-    let mut schedule_position = 0;
-    let mut still = 0;
-    while iterations < options.max_iterations {
-        delta = delta_at(schedule_position, delta0_m, options);
-        iterations += 1;
-        schedule_position += 1;
-        reachable.update(keypoints, &pose, &mut hints);
-        let matches = correspond(
-            mesh,
-            &reachable.points,
-            &pose,
-            delta,
-            (&lower, &upper),
-            lookup,
-            &mut reachable.hints,
-        );
-        if matches.len() < 6 {
-            break;
-        }
-        let step = step_for(&matches, options.step, radius_m);
-        let Some(step) = step else {
-            break;
-        };
-        let previous = pose;
-        pose = step * pose;
-        if stop.update(&pose) && schedule_position >= options.schedule_iterations {
-            converged = true;
-            break;
-        }
-        still = if pose_distance(&previous, &pose, radius_m) <= options.tolerance_m {
-            still + 1
-        } else {
-            0
-        };
-        if still >= 3 {
-            schedule_position = schedule_position.max(options.schedule_iterations);
-        }
-    }
-    ScheduleRun {
-        pose,
-        iterations,
-        converged,
-        delta,
-    }
-}
-
-/// The keypoints a run can match, kept between its steps: a keypoint inside the part's box grown
-/// by the run's first band lies within `reach_m` of the box's centre, so one more than
-/// `reach_m + margin_m` from where the centre was at the last filtering cannot match until the
-/// centre has moved by more than `margin_m`. Exact: the matches, and their order, are those of
-/// all the keypoints; a scan of a cell holds ten times more keypoints than the part's
-/// neighbourhood, and each step tested every one against the box.
-struct Reachable {
-    box_centre: Point3<f64>,
-    reach_m: f64,
-    margin_m: f64,
-    filtered_at: Option<Point3<f64>>,
-    /// Indices into the run's keypoints, and those keypoints.
-    indices: Vec<usize>,
-    points: Vec<Point3<f64>>,
-    /// Each kept keypoint's hint (empty without), copied back to the run's when refiltered.
-    hints: Vec<u32>,
-}
-
-impl Reachable {
-    fn new(lower: &Point3<f64>, upper: &Point3<f64>, delta0_m: f64) -> Self {
-        let half = (upper - lower) / 2.0;
-        let reach_m = (half + Vector3::repeat(delta0_m)).norm();
-        Self {
-            box_centre: Point3::from((lower.coords + upper.coords) / 2.0),
-            reach_m,
-            margin_m: 0.25 * reach_m,
-            filtered_at: None,
-            indices: Vec::new(),
-            points: Vec::new(),
-            hints: Vec::new(),
-        }
-    }
-
-    fn update(&mut self, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, hints: &mut [u32]) {
-        let centre = pose * self.box_centre;
-        if self
-            .filtered_at
-            .is_some_and(|at| (centre - at).norm() <= self.margin_m)
-        {
-            return;
-        }
-        for (&index, &hint) in self.indices.iter().zip(&self.hints) {
-            hints[index] = hint;
-        }
-        let limit = self.reach_m + self.margin_m;
-        self.indices = (0..keypoints.len())
-            .filter(|&i| (keypoints[i] - centre).norm() <= limit)
-            .collect();
-        self.points = self.indices.iter().map(|&i| keypoints[i]).collect();
-        self.hints = if hints.is_empty() {
-            Vec::new()
-        } else {
-            self.indices.iter().map(|&i| hints[i]).collect()
-        };
-        self.filtered_at = Some(centre);
-    }
-}
-
 /// How well a pose explains the scan: keypoints on the surface (within `band`) count for it,
 /// keypoints deep inside the part count against it twice, since a scanner cannot see into a
 /// solid. Clutter neither helps nor hurts a pose it does not touch.
@@ -702,28 +554,4 @@ fn point_to_plane(matches: &[Match], radius_m: f64) -> Option<Isometry3<f64>> {
     let rotation = UnitQuaternion::from_scaled_axis(omega);
     let shift = centre + translation - rotation * centre;
     Some(Isometry3::from_parts(Translation3::from(shift), rotation))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn both_schedules_run_from_delta0_to_delta_min_in_100_iterations() {
-        for schedule in [DeltaSchedule::Cosine, DeltaSchedule::CosineSquared] {
-            let options = PcaOptions {
-                schedule,
-                ..PcaOptions::default()
-            };
-            assert!((delta_at(0, 0.5, &options) - 0.5).abs() < 1e-15);
-            assert!((delta_at(100, 0.5, &options) - 0.01).abs() < 1e-15);
-            assert!((delta_at(250, 0.5, &options) - 0.01).abs() < 1e-15);
-        }
-        let cos = PcaOptions::default();
-        let squared = PcaOptions {
-            schedule: DeltaSchedule::CosineSquared,
-            ..PcaOptions::default()
-        };
-        assert!(delta_at(50, 0.5, &squared) < delta_at(50, 0.5, &cos));
-    }
 }

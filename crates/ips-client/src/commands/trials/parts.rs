@@ -1,7 +1,7 @@
 //! `ips trials`: the thesis's AlignmentTests for Point Set Alignment, the thesis's method and ours
 //! side by side on the same seeded displacements.
 
-use align_core::registration::pca::{PcaOptions, PcaStep};
+use align_core::registration::pca::{DeltaSchedule, PcaOptions, PcaStep};
 use align_core::registration::psa::{PsaMethod, PsaOptions, Search};
 use align_core::trials::clouds::pca_trial_scan;
 use align_core::trials::parts::{TestPart, step_block};
@@ -75,10 +75,12 @@ struct Configuration {
     options: PsaOptions,
 }
 
-/// The thesis's PCA: SVD steps, voxel-centroid keypoints, no exploration, no polishing run.
+/// The thesis's PCA: SVD steps, its eq. 33 schedule, voxel-centroid keypoints, no exploration,
+/// no polishing run.
 pub fn thesis_pca_options() -> PcaOptions {
     PcaOptions {
         step: PcaStep::PointToPoint,
+        schedule: DeltaSchedule::Cosine,
         voxel_centroids: true,
         starts: 0,
         polish: false,

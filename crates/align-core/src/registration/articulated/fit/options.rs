@@ -1,6 +1,6 @@
 //! The fit's options.
 
-use crate::registration::pca::PcaOptions;
+use crate::registration::pca::{DeltaSchedule, PcaOptions};
 use crate::registration::ppf::PpfOptions;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -80,6 +80,8 @@ impl Default for RobotFitOptions {
                 // runs about the found pose were a third of a 100 mm fit's rigid stage
                 // (docs/BENCHMARKS.md) and changed no fit of the bench's 40.
                 twin_search: false,
+                // The robot trials were measured with the cosine schedule (eq. 33).
+                schedule: DeltaSchedule::Cosine,
                 ..PcaOptions::default()
             },
             // The proximal links are small: 15 mm keypoints (45 mm for the exploration's and the
@@ -91,6 +93,7 @@ impl Default for RobotFitOptions {
                 // As measured for docs/articulated-trials.md.
                 polish: false,
                 without_large_planes: false,
+                schedule: DeltaSchedule::Cosine,
                 ..PcaOptions::default()
             },
             detection: PpfOptions::default(),

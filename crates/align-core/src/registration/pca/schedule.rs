@@ -1,0 +1,391 @@
+//! One run of the thesis's loop (filters, weights and a step per iteration while the search band
+//! shrinks) and how the band shrinks: the thesis's cosine (eq. 33), its code's cosine squared,
+//! or coarse to fine, as the local peers run (halving the band each time the pose settles in
+//! it, the wide bands on coarser keypoints).
+
+use nalgebra::{Isometry3, Point3, Vector3};
+
+use super::matching::{Lookup, NO_HINT, correspond};
+use super::{PcaOptions, step_for};
+use crate::geometry::Mesh;
+use crate::registration::convergence::{StopCriterion, pose_distance};
+use crate::registration::sampling::voxel_representatives;
+
+/// How delta shrinks over a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeltaSchedule {
+    /// delta_i = (delta0 - delta_min) cos(i / n * pi / 2) + delta_min (eq. 33).
+    Cosine,
+    /// delta_i = (delta0 - delta_min) cos^2(i / n * pi / 2) + delta_min: shrinks faster early.
+    CosineSquared,
+    /// Coarse to fine: the band holds while the pose still moves in it and halves once a step
+    /// moves the pose by less than [`SETTLED_FRACTION`] of it (or after
+    /// [`STEPS_PER_BAND`] steps), down to delta_min; bands more than [`BAND_PER_LEVEL_VOXEL`]
+    /// voxels of a coarser keypoint level wide run on that level. The cosine bands shrink
+    /// at a fixed pace, so a run spends a hundred steps in them whether the pose moves or not;
+    /// on the CAD scans the same successes came in half the time (docs/cad-scan-trials.md).
+    Halving,
+}
+
+/// A halving band halves once a step moves the pose (the thesis's distance) by less than this
+/// fraction of it: the pose has settled as far as the band can tell.
+const SETTLED_FRACTION: f64 = 0.01;
+
+/// A halving band halves after this many steps even when the pose still moves (clutter at the
+/// band's edge can keep it sliding by more than [`SETTLED_FRACTION`]).
+const STEPS_PER_BAND: usize = 15;
+
+/// A band runs on a coarser keypoint level only when it is more than this many of that level's
+/// voxels wide (the peers' coarse-to-fine stages use a voxel of a third of their band,
+/// docs/cad-scan-trials.md). Strictly more: the 3 cm run that ends a full alignment after its
+/// exploration stays on the fine keypoints.
+const BAND_PER_LEVEL_VOXEL: f64 = 3.0;
+
+/// The coarser keypoint levels of a halving run, as multiples of the options' voxel.
+const COARSER_LEVELS: [f64; 2] = [2.0, 4.0];
+
+/// The band of step `iteration` of a cosine schedule (the halving one keeps its own, see
+/// [`Band`]).
+pub(super) fn delta_at(iteration: usize, delta0: f64, options: &PcaOptions) -> f64 {
+    let delta_min = options.delta_min_m.min(delta0);
+    let fraction = (iteration as f64 / options.schedule_iterations.max(1) as f64).min(1.0);
+    let cos = (fraction * std::f64::consts::FRAC_PI_2).cos();
+    let shape = match options.schedule {
+        DeltaSchedule::CosineSquared => cos * cos,
+        DeltaSchedule::Cosine | DeltaSchedule::Halving => cos,
+    };
+    (delta0 - delta_min) * shape + delta_min
+}
+
+/// Where a run stands in its schedule.
+struct Band {
+    schedule: DeltaSchedule,
+    delta0_m: f64,
+    delta_min_m: f64,
+    /// Cosine schedules: the step count along the schedule (it jumps to the end once the pose
+    /// stands still). Halving: 0 until the last band has settled, then the schedule's length.
+    position: usize,
+    schedule_iterations: usize,
+    /// Halving: the band and the steps taken in it.
+    halving_m: f64,
+    steps_in_band: usize,
+}
+
+impl Band {
+    fn new(delta0_m: f64, options: &PcaOptions) -> Self {
+        Self {
+            schedule: options.schedule,
+            delta0_m,
+            delta_min_m: options.delta_min_m.min(delta0_m),
+            position: 0,
+            schedule_iterations: options.schedule_iterations,
+            halving_m: delta0_m,
+            steps_in_band: 0,
+        }
+    }
+
+    /// The band of the next step; a cosine schedule moves along by one.
+    fn next(&mut self, options: &PcaOptions) -> f64 {
+        if self.schedule == DeltaSchedule::Halving {
+            return self.halving_m;
+        }
+        let delta = delta_at(self.position, self.delta0_m, options);
+        self.position += 1;
+        delta
+    }
+
+    /// After a step that moved the pose by `moved_m` in a band of `delta_m`.
+    fn stepped(&mut self, moved_m: f64, delta_m: f64) {
+        if self.schedule != DeltaSchedule::Halving {
+            return;
+        }
+        self.steps_in_band += 1;
+        if moved_m <= SETTLED_FRACTION * delta_m || self.steps_in_band >= STEPS_PER_BAND {
+            if self.halving_m <= self.delta_min_m {
+                self.position = self.schedule_iterations;
+            } else {
+                self.halving_m = (self.halving_m / 2.0).max(self.delta_min_m);
+                self.steps_in_band = 0;
+            }
+        }
+    }
+
+    /// The pose stands still: the narrowing only exists to keep the part's points in the band
+    /// while it still moves, so the band goes to its end.
+    fn skip_to_end(&mut self) {
+        self.position = self.position.max(self.schedule_iterations);
+        self.halving_m = self.delta_min_m;
+    }
+
+    fn at_end(&self) -> bool {
+        self.position >= self.schedule_iterations
+    }
+}
+
+pub(super) struct ScheduleRun {
+    pub(super) pose: Isometry3<f64>,
+    pub(super) iterations: usize,
+    pub(super) converged: bool,
+    pub(super) delta: f64,
+}
+
+/// One run of the thesis's loop on `keypoints` alone (no coarser levels).
+pub(super) fn run_schedule(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+    slack: f64,
+) -> ScheduleRun {
+    run_schedule_on_levels(mesh, &[(0.0, keypoints)], start, delta0_m, options, slack)
+}
+
+/// The keypoints at the coarser voxel sizes a halving run from `delta0_m` can use (voxel,
+/// keypoints), finest first; none for a cosine schedule (the thesis's loop runs on one set) or a
+/// band too narrow for any.
+pub(super) fn coarser_levels(
+    keypoints: &[Point3<f64>],
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Vec<(f64, Vec<Point3<f64>>)> {
+    if options.schedule != DeltaSchedule::Halving {
+        return Vec::new();
+    }
+    COARSER_LEVELS
+        .iter()
+        .map(|factor| options.voxel_m * factor)
+        .filter(|voxel_m| voxel_m * BAND_PER_LEVEL_VOXEL < delta0_m)
+        .map(|voxel_m| (voxel_m, voxel_representatives(keypoints, voxel_m)))
+        .collect()
+}
+
+/// One run of the thesis's loop on keypoint levels (voxel, keypoints), finest first (voxel 0,
+/// so that every band may use it): each step runs on the coarsest level whose voxel the step's
+/// band exceeds [`BAND_PER_LEVEL_VOXEL`] times. A band of decimetres holds the part's whole
+/// neighbourhood, and at the fine voxel a 500 mm local run spent seconds matching it exactly;
+/// the narrow bands at the end, which set the precision, run on the finest.
+pub(super) fn run_schedule_on_levels(
+    mesh: &Mesh,
+    levels: &[(f64, &[Point3<f64>])],
+    start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+    slack: f64,
+) -> ScheduleRun {
+    let (lower, upper) = mesh.bounds();
+    let lookup = Lookup {
+        slack,
+        ..Lookup::exact(options.parallel)
+    };
+    let mut hints: Vec<Vec<u32>> = levels
+        .iter()
+        .map(|(_, keypoints)| {
+            if slack > 1.0 {
+                vec![NO_HINT; keypoints.len()]
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
+    let mut reachable: Vec<Reachable> = levels
+        .iter()
+        .map(|_| Reachable::new(&lower, &upper, delta0_m))
+        .collect();
+    let radius_m = mesh.radius_m();
+    let mut pose = *start;
+    let mut stop = StopCriterion::new(options.window, options.tolerance_m, radius_m);
+    stop.update(&pose);
+    let mut iterations = 0;
+    let mut converged = false;
+    let mut band = Band::new(delta0_m, options);
+    let mut delta = delta0_m;
+    let mut still = 0;
+    while iterations < options.max_iterations {
+        delta = band.next(options);
+        iterations += 1;
+        let level = levels
+            .iter()
+            .rposition(|(voxel_m, _)| voxel_m * BAND_PER_LEVEL_VOXEL < delta)
+            .unwrap_or(0);
+        let reachable = &mut reachable[level];
+        reachable.update(levels[level].1, &pose, &mut hints[level]);
+        let matches = correspond(
+            mesh,
+            &reachable.points,
+            &pose,
+            delta,
+            (&lower, &upper),
+            lookup,
+            &mut reachable.hints,
+        );
+        if matches.len() < 6 {
+            break;
+        }
+        let Some(step) = step_for(&matches, options.step, radius_m) else {
+            break;
+        };
+        let previous = pose;
+        pose = step * pose;
+        let moved_m = pose_distance(&previous, &pose, radius_m);
+        band.stepped(moved_m, delta);
+        if stop.update(&pose) && band.at_end() {
+            converged = true;
+            break;
+        }
+        still = if moved_m <= options.tolerance_m {
+            still + 1
+        } else {
+            0
+        };
+        if still >= 3 {
+            band.skip_to_end();
+        }
+    }
+    ScheduleRun {
+        pose,
+        iterations,
+        converged,
+        delta,
+    }
+}
+
+/// The keypoints a run can match, kept between its steps: a keypoint inside the part's box grown
+/// by the run's first band lies within `reach_m` of the box's centre, so one more than
+/// `reach_m + margin_m` from where the centre was at the last filtering cannot match until the
+/// centre has moved by more than `margin_m`. Exact: the matches, and their order, are those of
+/// all the keypoints; a scan of a cell holds ten times more keypoints than the part's
+/// neighbourhood, and each step tested every one against the box.
+struct Reachable {
+    box_centre: Point3<f64>,
+    reach_m: f64,
+    margin_m: f64,
+    filtered_at: Option<Point3<f64>>,
+    /// Indices into the run's keypoints, and those keypoints.
+    indices: Vec<usize>,
+    points: Vec<Point3<f64>>,
+    /// Each kept keypoint's hint (empty without), copied back to the run's when refiltered.
+    hints: Vec<u32>,
+}
+
+impl Reachable {
+    fn new(lower: &Point3<f64>, upper: &Point3<f64>, delta0_m: f64) -> Self {
+        let half = (upper - lower) / 2.0;
+        let reach_m = (half + Vector3::repeat(delta0_m)).norm();
+        Self {
+            box_centre: Point3::from((lower.coords + upper.coords) / 2.0),
+            reach_m,
+            margin_m: 0.25 * reach_m,
+            filtered_at: None,
+            indices: Vec::new(),
+            points: Vec::new(),
+            hints: Vec::new(),
+        }
+    }
+
+    fn update(&mut self, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, hints: &mut [u32]) {
+        let centre = pose * self.box_centre;
+        if self
+            .filtered_at
+            .is_some_and(|at| (centre - at).norm() <= self.margin_m)
+        {
+            return;
+        }
+        for (&index, &hint) in self.indices.iter().zip(&self.hints) {
+            hints[index] = hint;
+        }
+        let limit = self.reach_m + self.margin_m;
+        self.indices = (0..keypoints.len())
+            .filter(|&i| (keypoints[i] - centre).norm() <= limit)
+            .collect();
+        self.points = self.indices.iter().map(|&i| keypoints[i]).collect();
+        self.hints = if hints.is_empty() {
+            Vec::new()
+        } else {
+            self.indices.iter().map(|&i| hints[i]).collect()
+        };
+        self.filtered_at = Some(centre);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_cosine_schedules_run_from_delta0_to_delta_min_in_100_iterations() {
+        for schedule in [DeltaSchedule::Cosine, DeltaSchedule::CosineSquared] {
+            let options = PcaOptions {
+                schedule,
+                ..PcaOptions::default()
+            };
+            assert!((delta_at(0, 0.5, &options) - 0.5).abs() < 1e-15);
+            assert!((delta_at(100, 0.5, &options) - 0.01).abs() < 1e-15);
+            assert!((delta_at(250, 0.5, &options) - 0.01).abs() < 1e-15);
+        }
+        let cos = PcaOptions {
+            schedule: DeltaSchedule::Cosine,
+            ..PcaOptions::default()
+        };
+        let squared = PcaOptions {
+            schedule: DeltaSchedule::CosineSquared,
+            ..PcaOptions::default()
+        };
+        assert!(delta_at(50, 0.5, &squared) < delta_at(50, 0.5, &cos));
+    }
+
+    #[test]
+    fn a_halving_band_halves_when_the_pose_settles_or_after_its_steps_and_ends_at_delta_min() {
+        let options = PcaOptions {
+            schedule: DeltaSchedule::Halving,
+            ..PcaOptions::default()
+        };
+        let mut band = Band::new(0.08, &options);
+        // Still moving by more than a hundredth of the band: the band holds...
+        for _ in 0..STEPS_PER_BAND - 1 {
+            let delta = band.next(&options);
+            assert_eq!(delta, 0.08);
+            band.stepped(0.01, delta);
+        }
+        // ...until its steps are spent.
+        band.stepped(0.01, 0.08);
+        assert_eq!(band.next(&options), 0.04);
+        // Settled: halves at once, and never below delta_min.
+        band.stepped(1e-5, 0.04);
+        assert_eq!(band.next(&options), 0.02);
+        band.stepped(1e-5, 0.02);
+        assert_eq!(band.next(&options), 0.01);
+        assert!(!band.at_end());
+        band.stepped(1e-5, 0.01);
+        assert_eq!(band.next(&options), 0.01);
+        assert!(band.at_end());
+    }
+
+    #[test]
+    fn only_a_halving_run_from_a_wide_band_gets_coarser_keypoints() {
+        let keypoints: Vec<Point3<f64>> = (0..200)
+            .map(|i| Point3::new(f64::from(i) * 0.001, 0.0, 0.0))
+            .collect();
+        let halving = PcaOptions {
+            schedule: DeltaSchedule::Halving,
+            ..PcaOptions::default()
+        };
+        let cosine = PcaOptions {
+            schedule: DeltaSchedule::Cosine,
+            ..PcaOptions::default()
+        };
+        let voxels = |levels: Vec<(f64, Vec<Point3<f64>>)>| -> Vec<f64> {
+            levels.iter().map(|(voxel_m, _)| *voxel_m).collect()
+        };
+        assert!(coarser_levels(&keypoints, 0.5, &cosine).is_empty());
+        // 5 mm keypoints: 10 and 20 mm levels, each for bands over three of its voxels.
+        assert_eq!(
+            voxels(coarser_levels(&keypoints, 0.5, &halving)),
+            [0.01, 0.02]
+        );
+        assert_eq!(voxels(coarser_levels(&keypoints, 0.05, &halving)), [0.01]);
+        assert!(coarser_levels(&keypoints, 0.03, &halving).is_empty());
+        let levels = coarser_levels(&keypoints, 0.5, &halving);
+        assert!(levels[0].1.len() < keypoints.len() && levels[1].1.len() < levels[0].1.len());
+    }
+}
