@@ -1,12 +1,13 @@
 //! The search of one joint's value (with its partner when it spins its own links in place)
 //! around the current one: a coarse grid, then a fine one around the best local maxima.
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
 use super::context::FitContext;
-use super::placed::Placed;
-use super::tree::{Window, child_parameter, spins_in_place};
+use super::placed::{Placed, reach_m};
+use super::tree::{Window, axis_of, child_parameter, spins_in_place};
+use crate::registration::articulated::body::ArticulatedBody;
 
 /// Points the coarse level of a joint search scores candidates on (a stride sample).
 const COARSE_SEARCH_POINTS: usize = 1500;
@@ -166,6 +167,67 @@ impl FitContext<'_> {
         let sample: Vec<(Point3<f64>, f64)> = nearby.iter().step_by(stride).copied().collect();
         let fine_stride = nearby.len().div_ceil(FINE_SEARCH_POINTS);
         let fine: Vec<(Point3<f64>, f64)> = nearby.iter().step_by(fine_stride).copied().collect();
+        // Coarse steps move the farthest point by about a coarse voxel or more, at most 24 of them.
+        let coarse_steps = ((2.0 * window.sweep_m() / coarse_band).ceil() as usize).clamp(4, 24);
+        let coarse_step = 2.0 * window.half / coarse_steps as f64;
+        // The coarse level's band, the widest either level scores in.
+        let widest_band = (coarse_step * window.reach_m).max(coarse_band);
+        let partner_links: Vec<usize> = partner
+            .as_ref()
+            .map_or(Vec::new(), |w| body.moved_by(w.parameter));
+        let turned_alone: Vec<usize> = moved
+            .iter()
+            .filter(|link| !partner_links.contains(link))
+            .copied()
+            .collect();
+        // Only the points some value of the joint can bring a moved link to are scored (the
+        // scores are those of the whole samples): see [`SweptTubes`].
+        let (sample, fine) = match SweptTubes::new(
+            body,
+            &placed,
+            parameter,
+            &turned_alone,
+            partner
+                .as_ref()
+                .map(|w| (w.parameter, partner_links.as_slice())),
+            widest_band,
+        ) {
+            Some(tubes) => {
+                let swept = |points: Vec<(Point3<f64>, f64)>| -> Vec<(Point3<f64>, f64)> {
+                    points.into_iter().filter(|(p, _)| tubes.hold(p)).collect()
+                };
+                (swept(sample), swept(fine))
+            }
+            None => (sample, fine),
+        };
+        // The coarse level tries every partner value at each value of the joint: only the points
+        // that can count for one of them are scored. The links the partner does not move turn
+        // with the joint alone; the partner's stay within their reach of its axis origin,
+        // whatever its value (a point farther than a link's bounding sphere grown by the band
+        // counts 0 in [`Placed::evidence`], so the scores are those of the whole sample). The
+        // coarse level with a partner was three quarters of a fit's joint-search points.
+        let near_any_partner_value = |trial: &[f64], band: f64| -> Vec<(Point3<f64>, f64)> {
+            let at_value = Placed::new(body, world_from_root, trial);
+            let partner_origin = partner
+                .as_ref()
+                .filter(|w| !body.parameters()[w.parameter].prismatic)
+                .and_then(|w| axis_of(body, &at_value.poses, w.parameter))
+                .map(|axis| axis.origin);
+            let Some(origin) = partner_origin else {
+                return sample.clone();
+            };
+            let partner_reach_m = reach_m(&at_value, &partner_links, &origin) + band;
+            sample
+                .iter()
+                .filter(|(p, _)| {
+                    (p - origin).norm() <= partner_reach_m
+                        || turned_alone
+                            .iter()
+                            .any(|&link| at_value.within_reach(p, link, band))
+                })
+                .copied()
+                .collect()
+        };
         let count_points = |trial: &[f64], band: f64, points: &[(Point3<f64>, f64)]| -> i64 {
             let placed = Placed::new(body, world_from_root, trial);
             points
@@ -176,23 +238,61 @@ impl FitContext<'_> {
                 .sum()
         };
         let current = q[parameter];
-        // Coarse steps move the farthest point by about a coarse voxel or more, at most 24 of them.
-        let coarse_steps = ((2.0 * window.sweep_m() / coarse_band).ceil() as usize).clamp(4, 24);
+        // `fine` for the fine grid about a coarse peak (the joint within one coarse step of
+        // `centre`, the partner at `partner_value`): a moved link's bounding sphere moves by at
+        // most its centre's distance from the joint's axis origin times that step (the step
+        // itself for a prismatic joint), so the points farther than that and the band from
+        // every sphere at the peak count 0 at every value of the grid.
+        let near_fine_grid = |centre: f64,
+                              partner_value: Option<f64>,
+                              step: f64,
+                              band: f64|
+         -> Vec<(Point3<f64>, f64)> {
+            let mut trial = q.to_vec();
+            trial[parameter] = centre;
+            if let (Some(partner), Some(value)) = (&partner, partner_value) {
+                trial[partner.parameter] = value;
+            }
+            let at_peak = Placed::new(body, world_from_root, &trial);
+            let prismatic = body.parameters()[parameter].prismatic;
+            let grown: Vec<(usize, f64)> = moved
+                .iter()
+                .filter_map(|&link| {
+                    let (sphere_centre, _) = at_peak.spheres[link]?;
+                    let lever_m = if prismatic {
+                        1.0
+                    } else {
+                        (sphere_centre - origin).norm()
+                    };
+                    Some((link, band + lever_m * step))
+                })
+                .collect();
+            fine.iter()
+                .filter(|(p, _)| {
+                    grown
+                        .iter()
+                        .any(|&(link, reach)| at_peak.within_reach(p, link, reach))
+                })
+                .copied()
+                .collect()
+        };
         let score_grid = |candidates: &[f64],
                           band: f64,
                           partner_value: Option<f64>,
-                          coarse: bool|
+                          fine_points: Option<&[(Point3<f64>, f64)]>|
          -> Vec<(i64, Option<f64>)> {
+            let coarse = fine_points.is_none();
             let score = |value: f64| -> (i64, Option<f64>) {
                 let mut trial = q.to_vec();
                 trial[parameter] = value;
                 match (&partner, coarse) {
                     (Some(partner), true) => {
+                        let near = near_any_partner_value(&trial, band);
                         distinct_values(partner.grid(body, q[partner.parameter], partner.half, 8))
                             .into_iter()
                             .map(|child| {
                                 trial[partner.parameter] = child;
-                                (count_points(&trial, band, &sample), Some(child))
+                                (count_points(&trial, band, &near), Some(child))
                             })
                             .max_by_key(|(score, _)| *score)
                             .unwrap_or((0, None))
@@ -201,7 +301,7 @@ impl FitContext<'_> {
                         if let (Some(partner), Some(value)) = (&partner, partner_value) {
                             trial[partner.parameter] = value;
                         }
-                        let points = if coarse { &sample } else { &fine };
+                        let points = fine_points.unwrap_or(&sample);
                         (count_points(&trial, band, points), partner_value)
                     }
                 }
@@ -219,10 +319,9 @@ impl FitContext<'_> {
             a.1.cmp(&b.1)
                 .then((b.0 - current).abs().total_cmp(&(a.0 - current).abs()))
         };
-        let coarse_step = 2.0 * window.half / coarse_steps as f64;
         let coarse_values = window.grid(body, current, window.half, coarse_steps);
-        let band = (coarse_step * window.reach_m).max(coarse_band);
-        let coarse_scores = score_grid(&coarse_values, band, None, true);
+        let band = widest_band;
+        let coarse_scores = score_grid(&coarse_values, band, None, None);
         // Local maxima of the coarse scores, best first.
         let (peaks, _) = coarse_peaks(&coarse_values, &coarse_scores, current, count);
         let mut candidates: Vec<Candidate> = peaks
@@ -234,7 +333,8 @@ impl FitContext<'_> {
                 let fine_step = 2.0 * coarse_step / steps as f64;
                 let values = window.grid(body, centre, coarse_step, steps);
                 let band = (fine_step * window.reach_m).max(coarse_band);
-                let scores = score_grid(&values, band, partner_value, false);
+                let near = near_fine_grid(centre, partner_value, coarse_step, band);
+                let scores = score_grid(&values, band, partner_value, Some(&near));
                 let (value, score) = values
                     .iter()
                     .zip(&scores)
@@ -262,6 +362,69 @@ impl FitContext<'_> {
         }
         candidates.sort_by(|a, b| better(&(b.value, b.score), &(a.value, a.score)));
         candidates
+    }
+}
+
+/// Where a revolute joint's moved links can be at any of its values: turning about the axis keeps
+/// each point's height along it and distance from it, so a link's bounding sphere (grown by the
+/// band) sweeps a torus, and the links a partner joint moves stay within their reach of the
+/// partner's axis origin, which sweeps a circle. A point in no tube is farther than the band
+/// from every moved link at every value, and counts 0 in [`Placed::evidence`].
+struct SweptTubes {
+    origin: Point3<f64>,
+    axis: Vector3<f64>,
+    /// (height along the axis, distance from it, tube radius), m.
+    tubes: Vec<(f64, f64, f64)>,
+}
+
+impl SweptTubes {
+    /// `None` for a prismatic joint (or one without an axis), whose links do not turn.
+    fn new(
+        body: &ArticulatedBody,
+        placed: &Placed,
+        parameter: usize,
+        turned_alone: &[usize],
+        partner: Option<(usize, &[usize])>,
+        band: f64,
+    ) -> Option<Self> {
+        if body.parameters()[parameter].prismatic {
+            return None;
+        }
+        let axis = axis_of(body, &placed.poses, parameter)?;
+        let direction = axis.axis.try_normalize(1e-12)?;
+        let mut swept = Self {
+            origin: axis.origin,
+            axis: direction,
+            tubes: Vec::new(),
+        };
+        for &link in turned_alone {
+            if let Some((centre, radius)) = placed.spheres[link] {
+                let (height, distance) = swept.cylindrical(&centre);
+                swept.tubes.push((height, distance, radius + band));
+            }
+        }
+        if let Some((partner, partner_links)) = partner {
+            let partner_origin = axis_of(body, &placed.poses, partner)?.origin;
+            let reach = reach_m(placed, partner_links, &partner_origin);
+            let (height, distance) = swept.cylindrical(&partner_origin);
+            swept.tubes.push((height, distance, reach + band));
+        }
+        Some(swept)
+    }
+
+    /// Height along the axis and distance from it.
+    fn cylindrical(&self, point: &Point3<f64>) -> (f64, f64) {
+        let offset = point - self.origin;
+        let height = offset.dot(&self.axis);
+        (height, (offset - self.axis * height).norm())
+    }
+
+    fn hold(&self, point: &Point3<f64>) -> bool {
+        let (height, distance) = self.cylindrical(point);
+        self.tubes.iter().any(|&(h, d, tube)| {
+            let (dh, dd) = (height - h, distance - d);
+            dh * dh + dd * dd <= tube * tube
+        })
     }
 }
 
