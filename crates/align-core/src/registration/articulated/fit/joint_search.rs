@@ -370,7 +370,7 @@ impl FitContext<'_> {
 /// band) sweeps a torus, and the links a partner joint moves stay within their reach of the
 /// partner's axis origin, which sweeps a circle. A point in no tube is farther than the band
 /// from every moved link at every value, and counts 0 in [`Placed::evidence`].
-struct SweptTubes {
+pub(super) struct SweptTubes {
     origin: Point3<f64>,
     axis: Vector3<f64>,
     /// (height along the axis, distance from it, tube radius), m.
@@ -379,7 +379,7 @@ struct SweptTubes {
 
 impl SweptTubes {
     /// `None` for a prismatic joint (or one without an axis), whose links do not turn.
-    fn new(
+    pub(super) fn new(
         body: &ArticulatedBody,
         placed: &Placed,
         parameter: usize,
@@ -419,7 +419,7 @@ impl SweptTubes {
         (height, (offset - self.axis * height).norm())
     }
 
-    fn hold(&self, point: &Point3<f64>) -> bool {
+    pub(super) fn hold(&self, point: &Point3<f64>) -> bool {
         let (height, distance) = self.cylindrical(point);
         self.tubes.iter().any(|&(h, d, tube)| {
             let (dh, dd) = (height - h, distance - d);

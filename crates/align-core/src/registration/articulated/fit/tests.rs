@@ -4,7 +4,7 @@ use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3
 
 use super::base::{round_base_axis, turned_towards};
 use super::context::{FitContext, Keypoints};
-use super::joint_search::{distinct_values, spread_scores};
+use super::joint_search::{SweptTubes, distinct_values, spread_scores};
 use super::placed::{Placed, placed_radius};
 use super::refine::normal_equations;
 use super::{RobotFitOptions, align_robot};
@@ -448,4 +448,69 @@ fn a_flip_is_judged_on_the_links_its_joint_moves() {
             "{now_score} {flipped_score}"
         );
     });
+}
+
+/// The joint searches score only the points in the tori their links sweep ([`SweptTubes`]),
+/// which must leave out no point that could count: a point outside them counts 0 at every value
+/// of the joint and of its partner, here with the UR10's wrist 1 (wrist 2 as its partner) and
+/// its shoulder lift (no partner).
+#[test]
+fn a_point_outside_the_swept_tubes_counts_nothing_at_any_value() {
+    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+    let world_from_root = Isometry3::translation(0.1, 0.2, 0.0);
+    let q = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+    let placed = Placed::new(&body, &world_from_root, &q);
+    let band = 0.015;
+    let mut rng = TrialRng::new(3);
+    for (parameter, partner) in [(3, Some(4)), (1, None)] {
+        let moved = body.moved_by(parameter);
+        let partner_links = partner.map_or(Vec::new(), |p| body.moved_by(p));
+        let turned_alone: Vec<usize> = moved
+            .iter()
+            .filter(|link| !partner_links.contains(link))
+            .copied()
+            .collect();
+        let tubes = SweptTubes::new(
+            &body,
+            &placed,
+            parameter,
+            &turned_alone,
+            partner.map(|p| (p, partner_links.as_slice())),
+            band,
+        )
+        .unwrap();
+        let points: Vec<Point3<f64>> = (0..3000)
+            .map(|_| {
+                world_from_root
+                    * Point3::new(
+                        2.6 * rng.uniform() - 1.3,
+                        2.6 * rng.uniform() - 1.3,
+                        1.9 * rng.uniform() - 0.3,
+                    )
+            })
+            .collect();
+        let (mut left_out, mut counted) = (0, 0);
+        for _ in 0..20 {
+            let mut trial = q.to_vec();
+            trial[parameter] += 6.0 * (rng.uniform() - 0.5);
+            if let Some(partner) = partner {
+                trial[partner] += 6.0 * (rng.uniform() - 0.5);
+            }
+            let at = Placed::new(&body, &world_from_root, &trial);
+            for point in &points {
+                let evidence = at.evidence(point, band, band, &moved);
+                if !tubes.hold(point) {
+                    assert_eq!(evidence, 0, "joint {parameter} at {trial:?}: {point:?}");
+                    left_out += 1;
+                } else if evidence != 0 {
+                    counted += 1;
+                }
+            }
+        }
+        // Both sides of the test must happen: points left out, and points that count.
+        assert!(
+            left_out > 0 && counted > 0,
+            "{left_out} left out, {counted} counted"
+        );
+    }
 }
