@@ -378,7 +378,8 @@ pub(super) struct SweptTubes {
 }
 
 impl SweptTubes {
-    /// `None` for a prismatic joint (or one without an axis), whose links do not turn.
+    /// `None` for a prismatic joint or partner (or one without an axis), whose links do not
+    /// turn about it.
     pub(super) fn new(
         body: &ArticulatedBody,
         placed: &Placed,
@@ -387,7 +388,8 @@ impl SweptTubes {
         partner: Option<(usize, &[usize])>,
         band: f64,
     ) -> Option<Self> {
-        if body.parameters()[parameter].prismatic {
+        let prismatic = |p: usize| body.parameters()[p].prismatic;
+        if prismatic(parameter) || partner.is_some_and(|(p, _)| prismatic(p)) {
             return None;
         }
         let axis = axis_of(body, &placed.poses, parameter)?;
