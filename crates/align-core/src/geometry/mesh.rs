@@ -11,7 +11,7 @@ use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d_f64::math::Vector as GlamVector;
-use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
+use parry3d_f64::query::{PointQuery, PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
 use super::facing_tree::{Closest, FacingTree, Feature, NearbyTriangles};
@@ -380,6 +380,29 @@ impl Mesh {
         Some(self.surface_point(query, triangle, &from_glam(projection.point), feature))
     }
 
+    /// [`Mesh::closest_point_within`], exact, with the search bounded from the start by the
+    /// distance to triangle `hint` (the answer to a nearby query: the same point at the
+    /// previous step of a run), so that the descent opens only the nodes nearer than it.
+    pub fn closest_point_within_hinted(
+        &self,
+        query: &Point3<f64>,
+        max_distance_m: f64,
+        hint: Option<u32>,
+    ) -> Option<SurfacePoint> {
+        let bound_m = hint
+            .filter(|&t| (t as usize) < self.trimesh.indices().len())
+            .map(|t| {
+                let triangle = self.trimesh.triangle(t);
+                let projection = triangle.project_local_point(to_glam(query), false);
+                (from_glam(projection.point) - query.coords).norm()
+            })
+            // A hair beyond it, so that the hint's own triangle is still found.
+            .map_or(max_distance_m, |d| {
+                max_distance_m.min(d * (1.0 + 1e-9) + 1e-12)
+            });
+        self.closest_point_within(query, bound_m)
+    }
+
     /// [`Mesh::closest_point_within`], approximate by at most a factor `slack` (>= 1): the point
     /// found is no farther than `slack` times the closest one. For searches whose queries lie
     /// mostly far off the part (a coarse exploration in a band of half a metre), where an exact
@@ -677,6 +700,44 @@ mod tests {
                 mesh.closest_point_within_slack(&query, 0.5 * exact, 1.5, None)
                     .is_none()
             );
+        }
+    }
+
+    #[test]
+    fn a_hinted_query_gives_the_exact_answer_whatever_the_hint() {
+        // A capsule: hundreds of triangles, round and flat, so that a stale hint is often far
+        // from the best and a bound from it must not cut the true answer off.
+        let soup = crate::geometry::shapes::capsule_soup(0.05, 0.2);
+        let mesh = Mesh::new(&soup.vertices, &soup.triangles).unwrap();
+        let count = mesh.triangles().len() as u32;
+        let mut rng = crate::rng::SplitMix64::new(11);
+        for _ in 0..2000 {
+            let query = Point3::from(Vector3::from_fn(|_, _| 0.4 * rng.uniform() - 0.2));
+            let limit = 0.1 * rng.uniform();
+            let expected = mesh.closest_point_within(&query, limit);
+            let near = mesh
+                .closest_point(&(query + Vector3::new(0.01, -0.02, 0.005)))
+                .triangle;
+            let random = (rng.uniform() * f64::from(count)) as u32;
+            for hint in [None, Some(near), Some(random), Some(count + 7)] {
+                let found = mesh.closest_point_within_hinted(&query, limit, hint);
+                match (&expected, &found) {
+                    (None, None) => {}
+                    (Some(e), Some(f)) => {
+                        assert!(
+                            (e.signed_distance - f.signed_distance).abs() < 1e-12,
+                            "{query} hint {hint:?}: {} against {}",
+                            f.signed_distance,
+                            e.signed_distance
+                        );
+                        assert!((e.point - f.point).norm() < 1e-9);
+                        assert_eq!(e.on_face, f.on_face, "{query} hint {hint:?}");
+                    }
+                    _ => panic!(
+                        "{query} within {limit} hint {hint:?}: {found:?} against {expected:?}"
+                    ),
+                }
+            }
         }
     }
 

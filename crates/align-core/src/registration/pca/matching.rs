@@ -50,7 +50,8 @@ pub(super) const NO_HINT: u32 = u32::MAX;
 
 /// Cut-off and measure filters, then the surface correspondence and weight of each keypoint.
 /// `hints` (one per keypoint, or empty) remember each keypoint's triangle between the steps of
-/// an approximate run, whose far queries they answer in one projection.
+/// a run: an approximate run answers its far queries from them in one projection, an exact one
+/// starts its search bounded by them (the same answers, fewer nodes opened).
 pub(super) fn correspond(
     mesh: &Mesh,
     keypoints: &[Point3<f64>],
@@ -85,6 +86,14 @@ pub(super) fn correspond(
             } else {
                 found
             }
+        } else if let Some(hint) = hint {
+            // The exact answer, its search bounded from the start by the triangle this
+            // keypoint matched at the previous step: a step moves the part by a little, so that
+            // triangle is near the best and the descent opens a handful of nodes.
+            let remembered = Some(*hint).filter(|&h| h != NO_HINT);
+            let found = mesh.closest_point_within_hinted(&in_part, delta, remembered)?;
+            *hint = found.triangle;
+            found
         } else {
             mesh.closest_point_within(&in_part, delta)?
         };

@@ -6,7 +6,7 @@
 
 use nalgebra::{Isometry3, Point3};
 
-use super::matching::{Lookup, Match, correspond};
+use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::{PcaOptions, step_for};
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
@@ -66,6 +66,7 @@ pub(super) fn polish(
     let mut polished = *pose;
     let mut still = 0;
     let mut iterations = 0;
+    let mut hints = vec![NO_HINT; near.len()];
     while iterations < MAX_ITERATIONS {
         let mut matches = correspond(
             mesh,
@@ -74,7 +75,7 @@ pub(super) fn polish(
             band,
             (&lower, &upper),
             exact,
-            &mut [],
+            &mut hints,
         );
         if matches.len() < MIN_MATCHES {
             break;

@@ -180,13 +180,7 @@ pub(super) fn run_schedule_on_levels(
     };
     let mut hints: Vec<Vec<u32>> = levels
         .iter()
-        .map(|(_, keypoints)| {
-            if slack > 1.0 {
-                vec![NO_HINT; keypoints.len()]
-            } else {
-                Vec::new()
-            }
-        })
+        .map(|(_, keypoints)| vec![NO_HINT; keypoints.len()])
         .collect();
     let mut reachable: Vec<Reachable> = levels
         .iter()
