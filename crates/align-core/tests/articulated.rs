@@ -364,3 +364,64 @@ fn a_fit_is_the_same_with_and_without_threads() {
     assert_eq!(with.iterations, without.iterations);
     assert_eq!(with.rms_m.to_bits(), without.rms_m.to_bits());
 }
+
+/// The ABB IRB 1600's support package (ROS-Industrial, Apache-2.0), which the repository does
+/// not ship: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder.
+fn abb_support_dir() -> Option<std::path::PathBuf> {
+    let dir = std::env::var_os("ABB_IRB1600_SUPPORT_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../../shared/data/abb_irb1600/abb_irb1600_support")
+        });
+    dir.join("urdf/irb1600_6_12.urdf").is_file().then_some(dir)
+}
+
+/// Trials 25, 38 and 43 of the ABB IRB 1600 at 200 mm (seed 2024, `ips trials --urdf ...
+/// --home 0,0.3,-0.2,0,0.6,0`) ended with joint 4 0.9 rad off and joint 5 making up for it
+/// (link_4 24-33 mm off) until a local fit above 0.18 of the robot's radius took a second look
+/// at every joint; trial 45 lost joint 5 the same way the 500 mm trials did. Runs only where the
+/// third-party robot is (see `abb_support_dir`).
+#[test]
+fn the_abb_wrists_lost_at_200_mm_are_found() {
+    let Some(dir) = abb_support_dir() else {
+        eprintln!(
+            "skipped: the ABB IRB 1600 support package is not here (ABB_IRB1600_SUPPORT_DIR)"
+        );
+        return;
+    };
+    let mut packages = align_core::kinematics::PackageMap::new();
+    packages.insert("abb_irb1600_support".to_owned(), dir.clone());
+    let model = align_core::kinematics::RobotModel::from_urdf_file(
+        &dir.join("urdf/irb1600_6_12.urdf"),
+        &packages,
+    )
+    .expect("the ABB URDF loads");
+    let body = ArticulatedBody::from_model(&model).expect("the ABB has surfaces");
+    let scene = RobotScene {
+        world_from_root: cell_pose(),
+        q: vec![0.0, 0.3, -0.2, 0.0, 0.6, 0.0],
+        scan: RobotScanOptions::default(),
+    };
+    let hierarchical = Methods {
+        independent: false,
+        hierarchical: true,
+    };
+    for trial in [25, 38, 43, 45] {
+        let rows = run_robot_trials(
+            &body,
+            &scene,
+            &[0.2],
+            trial..trial + 1,
+            2024,
+            hierarchical,
+            |_, _| {},
+        );
+        // The flange's spin shows on a few rim points only: the fit reports it unobserved,
+        // which the tally counts apart from failures; everything else must be within 1 mm.
+        for row in &rows {
+            let tally = row.hierarchical.as_ref().expect("ran");
+            assert_eq!(tally.failed, 0, "trial {trial}, {}: {tally:?}", row.object);
+        }
+    }
+}

@@ -30,10 +30,11 @@
 //!    back (`base_turn_check`): the base's turn shows only on the base, and no step leaves it
 //!    once the base's features lie beyond the band.
 //! 5. Last, the same steps on every keypoint against the exact link surfaces; then, when delta
-//!    exceeds 0.4 times the robot's radius, a second look (`second_look`) at each joint whose
-//!    window reaches a quarter turn (after a global search also at each joint that spins its
-//!    own links in place): searched with its child over its window from the final state, each
-//!    candidate refined and kept when it explains `min_link_points` more where it differs. The
+//!    exceeds 0.18 times the robot's radius, a second look (`second_look`) at each joint whose
+//!    window reaches an eighth of a turn (after a global search a quarter turn, and at each
+//!    joint that spins its own links in place): searched with its child over its window from
+//!    the final state, each candidate refined and kept when it explains `min_link_points` more
+//!    where it differs, and the half turns tried again when the look moved a joint. The
 //!    half-turn states that were not kept give the `twin`, refined the same way before it is
 //!    called ambiguous.
 //!
@@ -261,7 +262,7 @@ pub fn align_robot(
             false,
         );
     }
-    let (spent, others) = fit.flip_check(&mut world_from_root, &mut q);
+    let (spent, mut others) = fit.flip_check(&mut world_from_root, &mut q);
     iterations += spent;
     if round_base.is_none() {
         iterations += fit.base_turn_check(&mut world_from_root, &mut q);
@@ -285,7 +286,29 @@ pub fn align_robot(
             .as_ref()
             .is_some_and(|mesh| delta_m > SECOND_LOOK_DELTA_PER_RADIUS * mesh.radius_m());
     if look_again {
+        let looked_from = q.clone();
         iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
+        // A look that moved a joint may have moved a wrist to the true pose's twin (a
+        // candidate of the elbow on the ABB IRB 1600 at 500 mm, trial 0), which the half turns
+        // tried before the look cannot repair: they are tried again from where it ended.
+        if q != looked_from {
+            let flipped_from = q.clone();
+            let (spent, more) = fit.flip_check(&mut world_from_root, &mut q);
+            iterations += spent;
+            others.extend(more);
+            if q != flipped_from {
+                iterations += refine(
+                    body,
+                    &keypoints,
+                    &mut world_from_root,
+                    &mut q,
+                    options.band_min_m,
+                    options,
+                    true,
+                );
+                state = final_state(body, &keypoints, &world_from_root, &q, options);
+            }
+        }
     }
     let report::FinalState {
         matches,
@@ -298,7 +321,6 @@ pub fn align_robot(
         }
     }
     // A joint the scan does not show is not what tells a twin apart.
-    let mut others = others;
     for (_, other) in &mut others {
         for (parameter, seen) in observed.iter().enumerate() {
             if !seen {
@@ -354,7 +376,9 @@ fn is_global(robot_at_start: &Mesh, delta_m: f64) -> bool {
 const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;
 
 /// A local fit takes a second look at its wide-window joints (see `second_look`) when delta
-/// exceeds this fraction of the robot's radius at the start joints. The ABB IRB 1600 at 500 mm
-/// (radius 1.0 m) needed it in 3 of 10 trials; at 100 mm it cost the UR10 10-15% of its fit
-/// (`articulated_starts` bench) for nothing, and no trial at 200 mm needed it.
-const SECOND_LOOK_DELTA_PER_RADIUS: f64 = 0.4;
+/// exceeds this fraction of the robot's radius at the start joints. The ABB IRB 1600 (radius
+/// 1.0 m) needed it in 3 of 10 trials at 500 mm and in 4 of 50 at 200 mm
+/// (docs/articulated-trials.md); none of 50 at 100 mm did. At 100 mm it cost the UR10 10-15% of its fit (`articulated_starts`
+/// bench) for nothing: the shipped robots' radii (between 0.56 and 0.67 m) put 100 mm below
+/// this fraction.
+const SECOND_LOOK_DELTA_PER_RADIUS: f64 = 0.18;
