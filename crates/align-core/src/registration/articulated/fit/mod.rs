@@ -378,7 +378,7 @@ const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;
 /// A local fit takes a second look at its wide-window joints (see `second_look`) when delta
 /// exceeds this fraction of the robot's radius at the start joints. The ABB IRB 1600 (radius
 /// 1.0 m) needed it in 3 of 10 trials at 500 mm and in 4 of 50 at 200 mm
-/// (docs/articulated-trials.md); none of 50 at 100 mm did. At 100 mm it cost the UR10 10-15% of its fit (`articulated_starts`
-/// bench) for nothing: the shipped robots' radii (between 0.56 and 0.67 m) put 100 mm below
-/// this fraction.
+/// (docs/articulated-trials.md); none of 50 at 100 mm did. At 100 mm it cost the UR10 10-15%
+/// of its fit (`articulated_starts` bench) for nothing: the shipped robots' radii (between 0.56
+/// and 0.67 m) put 100 mm below this fraction.
 const SECOND_LOOK_DELTA_PER_RADIUS: f64 = 0.18;
