@@ -7,7 +7,7 @@ use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
 use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
 use align_core::trials::robot_trials::{
-    Methods, RobotScene, perturb_robot, run_robot_trials, surface_deviation_m,
+    Methods, RobotScene, RobotTrialRow, perturb_robot, run_robot_trials, surface_deviation_m,
 };
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
@@ -217,23 +217,33 @@ fn trials_run_in_parts_give_the_figures_of_the_whole_run() {
 fn assert_trial_succeeds(robot: ShippedRobot, delta_m: f64, trial: usize) {
     let body = ArticulatedBody::from_model(&robot.model().expect("shipped URDF loads"))
         .expect("shipped robot has surfaces");
+    for row in &hierarchical_trial(&body, &trial_scene(robot), delta_m, trial) {
+        let tally = row.hierarchical.as_ref().expect("ran");
+        assert_eq!(tally.succeeded, 1, "{}: {tally:?}", row.object);
+    }
+}
+
+/// The rows of trial `trial` of the seeded hierarchical sequence (seed 2024, the trials'
+/// default) at `delta_m`.
+fn hierarchical_trial(
+    body: &ArticulatedBody,
+    scene: &RobotScene,
+    delta_m: f64,
+    trial: usize,
+) -> Vec<RobotTrialRow> {
     let hierarchical = Methods {
         independent: false,
         hierarchical: true,
     };
-    let rows = run_robot_trials(
-        &body,
-        &trial_scene(robot),
+    run_robot_trials(
+        body,
+        scene,
         &[delta_m],
         trial..trial + 1,
         2024,
         hierarchical,
         |_, _| {},
-    );
-    for row in &rows {
-        let tally = row.hierarchical.as_ref().expect("ran");
-        assert_eq!(tally.succeeded, 1, "{}: {tally:?}", row.object);
-    }
+    )
 }
 
 /// Trial 31 of the UR10 at 500 mm (seed 2024) folds the arm so far that the global search
@@ -403,20 +413,8 @@ fn the_abb_wrists_lost_at_200_mm_are_found() {
         q: vec![0.0, 0.3, -0.2, 0.0, 0.6, 0.0],
         scan: RobotScanOptions::default(),
     };
-    let hierarchical = Methods {
-        independent: false,
-        hierarchical: true,
-    };
     for trial in [25, 38, 43, 45] {
-        let rows = run_robot_trials(
-            &body,
-            &scene,
-            &[0.2],
-            trial..trial + 1,
-            2024,
-            hierarchical,
-            |_, _| {},
-        );
+        let rows = hierarchical_trial(&body, &scene, 0.2, trial);
         // The flange's spin shows on a few rim points only: the fit reports it unobserved,
         // which the tally counts apart from failures; everything else must be within 1 mm.
         for row in &rows {

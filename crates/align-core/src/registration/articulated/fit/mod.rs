@@ -268,17 +268,24 @@ pub fn align_robot(
         iterations += fit.base_turn_check(&mut world_from_root, &mut q);
     }
     // Last, every keypoint against the exact surfaces, in the narrow band the refinements
-    // before ended in (the state is within it).
-    iterations += refine(
-        body,
-        &keypoints,
-        &mut world_from_root,
-        &mut q,
-        options.band_min_m,
-        options,
-        true,
-    );
-    let mut state = final_state(body, &keypoints, &world_from_root, &q, options);
+    // before ended in (the state is within it), and what the state explains.
+    let refine_exactly = |world_from_root: &mut Isometry3<f64>, q: &mut Vec<f64>| {
+        let spent = refine(
+            body,
+            &keypoints,
+            world_from_root,
+            q,
+            options.band_min_m,
+            options,
+            true,
+        );
+        (
+            spent,
+            final_state(body, &keypoints, world_from_root, q, options),
+        )
+    };
+    let (spent, mut state) = refine_exactly(&mut world_from_root, &mut q);
+    iterations += spent;
     // Below a fraction of the robot's radius the searches from the start settle every joint in
     // its basin (every trial measured): the look would only cost time there.
     let look_again = global
@@ -297,16 +304,9 @@ pub fn align_robot(
             iterations += spent;
             others.extend(more);
             if q != flipped_from {
-                iterations += refine(
-                    body,
-                    &keypoints,
-                    &mut world_from_root,
-                    &mut q,
-                    options.band_min_m,
-                    options,
-                    true,
-                );
-                state = final_state(body, &keypoints, &world_from_root, &q, options);
+                let (spent, flipped) = refine_exactly(&mut world_from_root, &mut q);
+                iterations += spent;
+                state = flipped;
             }
         }
     }
