@@ -164,21 +164,25 @@ fn reference_frame(reference: &Oriented) -> Isometry3<f64> {
         * Isometry3::translation(-reference.point.x, -reference.point.y, -reference.point.z)
 }
 
-/// Angle of `point` about +x once `frame` has moved it (in (-pi, pi]).
-/// `difference.rem_euclid(TAU)` without its division where, as for two turns from `atan2`, the
-/// difference lies within a turn of zero (the division took a third of the voting's time): the
-/// same additions, so the same values.
-fn wrap_turn(difference: f64) -> f64 {
-    use std::f64::consts::TAU;
-    if (0.0..TAU).contains(&difference) {
-        difference
-    } else if (-TAU..0.0).contains(&difference) {
-        difference + TAU
-    } else {
-        difference.rem_euclid(TAU)
-    }
+/// A turn in (-pi, pi] (or any angle) as a fraction of a full turn in 32-bit fixed point: the
+/// difference of two such turns, wrapped to a full turn, is one `wrapping_sub`, and its bin one
+/// multiply and shift (the voting's inner loop spent most of its time on the float version's
+/// wrap and division). The resolution, 1.5e-9 rad, is far below any bin.
+fn fixed_turn(turn: f64) -> u32 {
+    let fraction = turn.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU;
+    // `as` saturates: a fraction that rounds up to exactly one turn wraps to zero by hand.
+    (fraction * FULL_TURN as f64).min(FULL_TURN as f64 - 1.0) as u32
 }
 
+/// A full turn in [`fixed_turn`]'s units.
+const FULL_TURN: u64 = 1 << 32;
+
+/// The bin of `turn_bins` over a full turn that a wrapped fixed-point turn falls in.
+fn turn_bin(turn: u32, turn_bins: usize) -> usize {
+    ((u64::from(turn) * turn_bins as u64) >> 32) as usize
+}
+
+/// Angle of `point` about +x once `frame` has moved it (in (-pi, pi]).
 fn turn_of(frame: &Isometry3<f64>, point: &Point3<f64>) -> f64 {
     let moved = frame * point;
     moved.z.atan2(moved.y)
@@ -281,7 +285,7 @@ pub fn ppf_poses_where(
     // The model's table: description -> (reference sample, its turn).
     let frames: Vec<Isometry3<f64>> = model.iter().map(reference_frame).collect();
     let distance_bins = (diameter / options.step_m) as usize + 1;
-    let mut table: Vec<Vec<(u32, f32)>> =
+    let mut table: Vec<Vec<(u32, u32)>> =
         vec![Vec::new(); distance_bins * options.angle_bins.max(1).pow(3)];
     for (r, reference) in model.iter().enumerate() {
         for (i, other) in model.iter().enumerate() {
@@ -289,7 +293,7 @@ pub fn ppf_poses_where(
                 continue;
             }
             if let Some(key) = feature(reference, other, distance_bins, options) {
-                table[key].push((r as u32, turn_of(&frames[r], &other.point) as f32));
+                table[key].push((r as u32, fixed_turn(turn_of(&frames[r], &other.point))));
             }
         }
     }
@@ -335,17 +339,14 @@ pub fn ppf_poses_where(
             let mut accumulators = vec![0u32; 2 * slots];
             let (plus, minus) = accumulators.split_at_mut(slots);
             for (key, point) in &pairs {
-                let scene_turns = frames_by_sign.map(|frame| turn_of(&frame, point));
+                let scene_turns = frames_by_sign.map(|frame| fixed_turn(turn_of(&frame, point)));
                 for &(model_reference, model_turn) in &table[*key] {
-                    let model_turn = f64::from(model_turn);
                     let row = model_reference as usize * turn_bins;
                     for (accumulator, scene_turn) in
                         [&mut *plus, &mut *minus].into_iter().zip(scene_turns)
                     {
-                        let turn = wrap_turn(scene_turn - model_turn);
-                        let bin = ((turn / turn_step) as usize).min(turn_bins - 1);
-                        let slot = &mut accumulator[row + bin];
-                        *slot += 1;
+                        accumulator
+                            [row + turn_bin(scene_turn.wrapping_sub(model_turn), turn_bins)] += 1;
                     }
                 }
             }
@@ -402,27 +403,32 @@ mod tests {
     use super::*;
 
     #[test]
-    fn wrapping_a_turn_matches_rem_euclid_in_and_beyond_the_range_of_two_turns() {
+    fn fixed_point_turns_bin_their_wrapped_difference_as_the_float_angles_do() {
         use std::f64::consts::{PI, TAU};
-        let mut values = vec![
-            0.0,
-            -0.0,
-            TAU,
-            -TAU,
-            PI,
-            -PI,
-            2.0 * TAU,
-            -2.5 * TAU,
-            1e-17,
-            -1e-17,
-        ];
-        values.extend((0..2000).map(|i| -2.2 * TAU + i as f64 * 4.4 * TAU / 1999.0));
-        // The case f32 rounding makes: a scene turn of -pi less a model turn of pi rounded up.
-        values.push(-PI - f64::from(PI as f32));
-        for value in values {
-            let (fast, general) = (wrap_turn(value), value.rem_euclid(TAU));
-            assert!(fast == general, "{value}: {fast} against {general}");
+        let turn_bins = 30;
+        let step = TAU / turn_bins as f64;
+        let mut angles = vec![0.0, -0.0, PI, -PI, TAU, -TAU, 1e-17, -1e-17, PI - 1e-12];
+        angles.extend((0..400).map(|i| -PI + i as f64 * TAU / 399.0));
+        angles.extend((0..turn_bins).map(|bin| bin as f64 * step - PI));
+        for &scene in &angles {
+            for &model in &angles {
+                let difference = (scene - model).rem_euclid(TAU);
+                let expected = ((difference / step) as usize).min(turn_bins - 1);
+                let got = turn_bin(fixed_turn(scene).wrapping_sub(fixed_turn(model)), turn_bins);
+                // Only a difference within the fixed point's resolution of a bin's edge (or
+                // of a full turn) may land in the neighbouring bin.
+                let from_edge = (difference / step - (difference / step).round()).abs() * step;
+                let near_full_turn = (TAU - difference).min(difference) < 1e-8;
+                assert!(
+                    got == expected || from_edge < 1e-8 || near_full_turn,
+                    "{scene} - {model}: bin {got} against {expected}"
+                );
+                assert!(got < turn_bins);
+            }
         }
+        // A fraction that rounds up to a full turn stays inside the range.
+        assert_eq!(fixed_turn(-1e-300), u32::MAX);
+        assert_eq!(turn_bin(u32::MAX, turn_bins), turn_bins - 1);
     }
 
     /// A scan-like cloud of a mesh: points on its surface every few millimetres.
