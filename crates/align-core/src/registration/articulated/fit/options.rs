@@ -24,8 +24,10 @@ pub struct RobotFitOptions {
     pub base_candidates: usize,
     /// Base poses the detection of the proximal links gives when the start is not local (delta
     /// beyond the robot's radius). Point pair features can rank the true place of a boxy base
-    /// below others: on the ABB IRB 1600 at 1000 mm it was the sixth of twelve in a trial that
-    /// four lost (docs/articulated-trials.md).
+    /// below others: the proximal links are detected at the start's value of the first joint,
+    /// and where that is far off only the base's features vote for the truth. On the ABB IRB
+    /// 1600 at 1000 mm the pose nearest the truth ranked 6th to 29th in the four trials of 50
+    /// that fewer lost (14 and 16 with 4 poses, 17 and 21 with 12; docs/articulated-trials.md).
     pub detected_bases: usize,
     pub max_iterations: usize,
     /// The refinement stops when a step moves the points along their normals by less than this
@@ -53,7 +55,7 @@ impl Default for RobotFitOptions {
             search_passes: 2,
             beam_width: 6,
             base_candidates: 4,
-            detected_bases: 12,
+            detected_bases: 40,
             // The last refinement starts within the narrow band and takes a handful when the
             // correspondences settle; should they cycle (points switching between links at the
             // 0.1 mm level), it keeps the best of 25.
