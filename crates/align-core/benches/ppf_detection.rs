@@ -3,18 +3,23 @@
 //! local) and of the whole robot at home, in the cluttered 20k-point scene of the `articulated`
 //! benches, anywhere within 2 m of the true root. Prints, per case, the model's triangles, the
 //! poses found, how far the best one puts the model's centroid from the truth, and the time of
-//! each of `--runs` detections (min / median / max).
+//! each of `--runs` detections (min / median / max). Where the ABB IRB 1600's support package is
+//! (`$ABB_IRB1600_SUPPORT_DIR`, else `../shared/data` beside the workspace; the repository does
+//! not ship it), its proximal links too, in the full scan of its trials (`ips trials --urdf`,
+//! about 90k points at its trial pose): the case the fit meets at 1000 mm.
 //! Run: cargo bench -p align-core --bench ppf_detection [-- --runs N]
 
 use std::time::Instant;
 
+use align_core::registration::articulated::ArticulatedBody;
 use align_core::registration::ppf::{PpfOptions, ppf_poses};
 use align_core::robots::ShippedRobot;
+use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
 use nalgebra::Point3;
 
 #[path = "common/robot_scene.rs"]
 mod robot_scene;
-use robot_scene::{RobotScene, robot_scene};
+use robot_scene::{RobotScene, robot_scene, trial_root_pose};
 
 fn runs_argument() -> usize {
     let args: Vec<String> = std::env::args().collect();
@@ -36,19 +41,40 @@ fn main() {
         "| case | triangles | poses | best pose's centroid error mm | min ms | median ms | max ms |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
-    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+    let mut cases: Vec<(String, RobotScene, Vec<f64>, bool)> =
+        [ShippedRobot::Ur10, ShippedRobot::Iiwa14]
+            .into_iter()
+            .map(|robot| {
+                (
+                    robot.name().to_owned(),
+                    robot_scene(robot),
+                    robot.home(),
+                    true,
+                )
+            })
+            .collect();
+    match abb_scene() {
+        Some((scene, home)) => cases.push(("abb_irb1600".to_owned(), scene, home, false)),
+        None => eprintln!(
+            "the ABB IRB 1600 is skipped: its support package is not here (ABB_IRB1600_SUPPORT_DIR)"
+        ),
+    }
+    for (name, scene, home, with_whole) in cases {
         let RobotScene {
             body,
             world_from_root,
             cloud,
-        } = robot_scene(robot);
-        let home = robot.home();
+        } = scene;
         // The links no joint moves or only the first one does (the fit's proximal links).
         let first_movers: Vec<usize> = (0..body.links().len())
             .filter(|&link| body.movers(link).len() <= 1)
             .collect();
         let all: Vec<usize> = (0..body.links().len()).collect();
-        for (what, links) in [("proximal links", first_movers), ("whole robot", all)] {
+        let mut objects = vec![("proximal links", first_movers)];
+        if with_whole {
+            objects.push(("whole robot", all));
+        }
+        for (what, links) in objects {
             let Some(mesh) = body.rigid_mesh_of(&home, &links) else {
                 continue;
             };
@@ -66,8 +92,7 @@ fn main() {
                 (best.world_from_model * mesh.centroid() - truth).norm() * 1e3
             });
             println!(
-                "| {} {what} | {} | {} | {error_mm:.1} | {:.0} | {:.0} | {:.0} |",
-                robot.name(),
+                "| {name} {what} | {} | {} | {error_mm:.1} | {:.0} | {:.0} | {:.0} |",
                 mesh.triangles().len(),
                 poses.len(),
                 times_ms[0],
@@ -76,4 +101,36 @@ fn main() {
             );
         }
     }
+}
+
+/// The ABB IRB 1600 (ROS-Industrial's support package, Apache-2.0) in the scene of its trials
+/// (`ips trials --urdf ... --home 0,0.3,-0.2,0,0.6,0`): the trials' root pose and scan, where
+/// the package is.
+fn abb_scene() -> Option<(RobotScene, Vec<f64>)> {
+    let dir = std::env::var_os("ABB_IRB1600_SUPPORT_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../../shared/data/abb_irb1600/abb_irb1600_support")
+        });
+    let urdf = dir.join("urdf/irb1600_6_12.urdf");
+    if !urdf.is_file() {
+        return None;
+    }
+    let mut packages = align_core::kinematics::PackageMap::new();
+    packages.insert("abb_irb1600_support".to_owned(), dir);
+    let model = align_core::kinematics::RobotModel::from_urdf_file(&urdf, &packages)
+        .expect("the ABB URDF loads");
+    let body = ArticulatedBody::from_model(&model).expect("the ABB has surfaces");
+    let world_from_root = trial_root_pose();
+    let home = vec![0.0, 0.3, -0.2, 0.0, 0.6, 0.0];
+    let cloud = scan_robot(&body, &world_from_root, &home, &RobotScanOptions::default());
+    Some((
+        RobotScene {
+            body,
+            world_from_root,
+            cloud,
+        },
+        home,
+    ))
 }

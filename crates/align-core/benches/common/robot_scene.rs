@@ -12,11 +12,16 @@ pub struct RobotScene {
     pub cloud: Vec<Point3<f64>>,
 }
 
-pub fn robot_scene(robot: ShippedRobot) -> RobotScene {
-    let world_from_root = Isometry3::from_parts(
+/// Where the trials put a robot's root (`ips trials`): 0.2 m off the cell origin, turned 0.4 rad.
+pub fn trial_root_pose() -> Isometry3<f64> {
+    Isometry3::from_parts(
         Translation3::new(0.2, -0.1, 0.0),
         UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
-    );
+    )
+}
+
+pub fn robot_scene(robot: ShippedRobot) -> RobotScene {
+    let world_from_root = trial_root_pose();
     let model = robot.model().expect("shipped");
     let body = ArticulatedBody::from_model(&model).expect("surfaces");
     let cloud = scan_robot_of_about(
