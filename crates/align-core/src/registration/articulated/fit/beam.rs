@@ -46,10 +46,16 @@ impl FitContext<'_> {
             body,
             scan,
             global,
+            near,
             options,
             ..
         } = *self;
-        let width = options.beam_width.max(1);
+        let (width, peaks_per_state) = if near {
+            (options.near_beam_width, super::NEAR_PEAKS_PER_STATE)
+        } else {
+            (options.beam_width, PEAKS_PER_STATE)
+        };
+        let width = width.max(1);
         let stride = scan.coarse.len().div_ceil(BEAM_SCORE_POINTS).max(1);
         let sample: Vec<Point3<f64>> = scan.coarse.iter().step_by(stride).copied().collect();
         let band = 3.0 * options.voxel_m;
@@ -62,7 +68,7 @@ impl FitContext<'_> {
         for parameter in search_order(body) {
             // The states are searched side by side (each search is parallel too, but its last
             // few candidate values leave a core idle); merged in beam order, as if one by one.
-            let peaks = width.min(PEAKS_PER_STATE);
+            let peaks = width.min(peaks_per_state);
             let search = |(base, q): &(Isometry3<f64>, Vec<f64>)| {
                 if global {
                     self.global_joint_candidates(base, q, parameter, peaks)

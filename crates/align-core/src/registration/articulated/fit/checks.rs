@@ -67,6 +67,7 @@ impl FitContext<'_> {
             delta_m,
             global,
             options,
+            ..
         } = *self;
         let mut iterations = 0;
         for parameter in search_order(body) {

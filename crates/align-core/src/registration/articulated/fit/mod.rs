@@ -38,6 +38,11 @@
 //!    half-turn states that were not kept give the `twin`, refined the same way before it is
 //!    called ambiguous.
 //!
+//! When delta is at most 0.18 of the robot's radius (at the start joints) the start is near:
+//! the searches from it settle every joint in its basin, so the beam keeps `near_beam_width`
+//! states and follows two values of a joint from each, the joints are searched
+//! `near_search_passes` times, and there is no second look.
+//!
 //! When delta exceeds the robot's radius (at the start joints) the start is not local: the
 //! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
 //! half turn. Two stages then change. The proximal links are detected anywhere the root may be
@@ -205,6 +210,9 @@ pub fn align_robot(
     let global = start_mesh
         .as_ref()
         .is_some_and(|mesh| is_global(mesh, delta_m));
+    let near_start = start_mesh
+        .as_ref()
+        .is_some_and(|mesh| delta_m <= NEAR_DELTA_PER_RADIUS * mesh.radius_m());
     let whole = match &start_mesh {
         Some(mesh) => {
             align_cloud(mesh, &near, world_from_root_start, delta_m, &options.base)
@@ -219,6 +227,7 @@ pub fn align_robot(
         scan,
         delta_m,
         global,
+        near: near_start,
         options,
     };
     let round_base = round_base_axis(body, q0, options);
@@ -248,7 +257,12 @@ pub fn align_robot(
     );
     // Again with every joint near: a joint searched while the links below it were far off is
     // searched once more.
-    for _ in 1..options.search_passes.max(1) {
+    let passes = if near_start {
+        options.near_search_passes
+    } else {
+        options.search_passes
+    };
+    for _ in 1..passes.max(1) {
         for parameter in search_order(body) {
             fit.search_joint(&world_from_root, &mut q, parameter);
         }
@@ -288,10 +302,7 @@ pub fn align_robot(
     iterations += spent;
     // Below a fraction of the robot's radius the searches from the start settle every joint in
     // its basin (every trial measured): the look would only cost time there.
-    let look_again = global
-        || start_mesh
-            .as_ref()
-            .is_some_and(|mesh| delta_m > SECOND_LOOK_DELTA_PER_RADIUS * mesh.radius_m());
+    let look_again = global || (start_mesh.is_some() && !near_start);
     if look_again {
         let looked_from = q.clone();
         iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
@@ -375,10 +386,17 @@ fn is_global(robot_at_start: &Mesh, delta_m: f64) -> bool {
 /// the start joints (see [`align_robot`]): turns of the whole robot by more than a radian.
 const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;
 
-/// A local fit takes a second look at its wide-window joints (see `second_look`) when delta
-/// exceeds this fraction of the robot's radius at the start joints. The ABB IRB 1600 (radius
-/// 1.0 m) needed it in 3 of 10 trials at 500 mm and in 4 of 50 at 200 mm
-/// (docs/articulated-trials.md); none of 50 at 100 mm did. At 100 mm it cost the UR10 10-15%
-/// of its fit (`articulated_starts` bench) for nothing: the shipped robots' radii (between 0.56
-/// and 0.67 m) put 100 mm below this fraction.
-const SECOND_LOOK_DELTA_PER_RADIUS: f64 = 0.18;
+/// A start is near when delta is at most this fraction of the robot's radius at the start
+/// joints: the searches from it settle every joint in its basin, so the fit searches with a
+/// narrower beam (`near_beam_width` states, [`NEAR_PEAKS_PER_STATE`] values of a joint from
+/// each), `near_search_passes` passes and no second look (`second_look`). The ABB IRB 1600
+/// (radius 1.0 m) needed the look in 3 of 10 trials at 500 mm and in 4 of 50 at 200 mm
+/// (docs/articulated-trials.md); none of 50 at 100 mm did. At 100 mm the look cost the UR10
+/// 10-15% of its fit (`articulated_starts` bench) for nothing: the shipped robots' radii
+/// (between 0.56 and 0.67 m) put 100 mm below this fraction. The narrower search: every link
+/// 50/50 at 50 and 100 mm on the UR10, the iiwa14 and the ABB (docs/articulated-trials.md).
+const NEAR_DELTA_PER_RADIUS: f64 = 0.18;
+
+/// Values of a joint the beam search follows from each of its states when the start is near
+/// (see [`NEAR_DELTA_PER_RADIUS`]).
+const NEAR_PEAKS_PER_STATE: usize = 2;

@@ -18,6 +18,11 @@ pub struct RobotFitOptions {
     pub search_passes: usize,
     /// States the first search down the tree keeps at each joint.
     pub beam_width: usize,
+    /// `beam_width` and `search_passes` when the start is near: delta at most 0.18 of the
+    /// robot's radius at the start joints, where the searches from the start settle every
+    /// joint in its basin (see `align_robot`).
+    pub near_beam_width: usize,
+    pub near_search_passes: usize,
     /// Further base poses the search starts from when the start may be off by about as much as
     /// the base is big: rigid alignments of the base and the links only the first joint moves
     /// (0: none, detected ones included).
@@ -54,6 +59,10 @@ impl Default for RobotFitOptions {
             min_observability: 0.05,
             search_passes: 2,
             beam_width: 6,
+            // About a third of a 100 mm fit's instructions less (`articulated_starts`, callgrind)
+            // with every link 50/50 at 50 and 100 mm (docs/articulated-trials.md).
+            near_beam_width: 3,
+            near_search_passes: 1,
             base_candidates: 4,
             detected_bases: 40,
             // The last refinement starts within the narrow band and takes a handful when the

@@ -138,6 +138,7 @@ fn a_square_base_turned_with_joint_1_making_up_for_it_is_turned_back() {
         scan,
         delta_m: 0.5,
         global: false,
+        near: false,
         options: &options,
     };
     fit.base_turn_check(&mut base, &mut q);
@@ -349,6 +350,7 @@ fn with_keyed_wrist_scan<R>(
         },
         delta_m: 0.5,
         global,
+        near: false,
         options: &options,
     })
 }
