@@ -170,7 +170,8 @@ fn reference_frame(reference: &Oriented) -> Isometry3<f64> {
 /// wrap and division). The resolution, 1.5e-9 rad, is far below any bin.
 fn fixed_turn(turn: f64) -> u32 {
     let fraction = turn.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU;
-    // `as` saturates: a fraction that rounds up to exactly one turn wraps to zero by hand.
+    // A tiny negative angle's `rem_euclid` rounds to a full turn: it stays just below one,
+    // where the angle is (`as` would saturate there anyway; the bound says so).
     (fraction * FULL_TURN as f64).min(FULL_TURN as f64 - 1.0) as u32
 }
 
