@@ -11,7 +11,6 @@
 
 use std::time::Instant;
 
-use align_core::registration::articulated::ArticulatedBody;
 use align_core::registration::ppf::{PpfOptions, ppf_poses};
 use align_core::robots::ShippedRobot;
 use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
@@ -20,6 +19,9 @@ use nalgebra::Point3;
 #[path = "common/robot_scene.rs"]
 mod robot_scene;
 use robot_scene::{RobotScene, robot_scene, trial_root_pose};
+#[path = "../tests/common/abb.rs"]
+mod abb;
+use abb::{ABB_TRIAL_HOME, abb_irb1600};
 
 fn runs_argument() -> usize {
     let args: Vec<String> = std::env::args().collect();
@@ -53,11 +55,8 @@ fn main() {
                 )
             })
             .collect();
-    match abb_scene() {
-        Some((scene, home)) => cases.push(("abb_irb1600".to_owned(), scene, home, false)),
-        None => eprintln!(
-            "the ABB IRB 1600 is skipped: its support package is not here (ABB_IRB1600_SUPPORT_DIR)"
-        ),
+    if let Some((scene, home)) = abb_scene() {
+        cases.push(("abb_irb1600".to_owned(), scene, home, false));
     }
     for (name, scene, home, with_whole) in cases {
         let RobotScene {
@@ -103,27 +102,12 @@ fn main() {
     }
 }
 
-/// The ABB IRB 1600 (ROS-Industrial's support package, Apache-2.0) in the scene of its trials
-/// (`ips trials --urdf ... --home 0,0.3,-0.2,0,0.6,0`): the trials' root pose and scan, where
-/// the package is.
+/// The ABB IRB 1600 in the scene of its trials (`ips trials --urdf ... --home
+/// 0,0.3,-0.2,0,0.6,0`): the trials' root pose and full scan, where its package is.
 fn abb_scene() -> Option<(RobotScene, Vec<f64>)> {
-    let dir = std::env::var_os("ABB_IRB1600_SUPPORT_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../../shared/data/abb_irb1600/abb_irb1600_support")
-        });
-    let urdf = dir.join("urdf/irb1600_6_12.urdf");
-    if !urdf.is_file() {
-        return None;
-    }
-    let mut packages = align_core::kinematics::PackageMap::new();
-    packages.insert("abb_irb1600_support".to_owned(), dir);
-    let model = align_core::kinematics::RobotModel::from_urdf_file(&urdf, &packages)
-        .expect("the ABB URDF loads");
-    let body = ArticulatedBody::from_model(&model).expect("the ABB has surfaces");
+    let body = abb_irb1600()?;
     let world_from_root = trial_root_pose();
-    let home = vec![0.0, 0.3, -0.2, 0.0, 0.6, 0.0];
+    let home = ABB_TRIAL_HOME.to_vec();
     let cloud = scan_robot(&body, &world_from_root, &home, &RobotScanOptions::default());
     Some((
         RobotScene {

@@ -11,6 +11,10 @@ use align_core::trials::robot_trials::{
 };
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
+#[path = "common/abb.rs"]
+mod abb;
+use abb::{ABB_TRIAL_HOME, abb_irb1600};
+
 fn cell_pose() -> Isometry3<f64> {
     Isometry3::from_parts(
         Translation3::new(0.2, -0.1, 0.0),
@@ -375,49 +379,17 @@ fn a_fit_is_the_same_with_and_without_threads() {
     assert_eq!(with.rms_m.to_bits(), without.rms_m.to_bits());
 }
 
-/// The ABB IRB 1600's support package (ROS-Industrial, Apache-2.0), which the repository does
-/// not ship: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder.
-fn abb_support_dir() -> Option<std::path::PathBuf> {
-    let dir = std::env::var_os("ABB_IRB1600_SUPPORT_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../../shared/data/abb_irb1600/abb_irb1600_support")
-        });
-    dir.join("urdf/irb1600_6_12.urdf").is_file().then_some(dir)
-}
-
-/// The ABB IRB 1600 in the scene of its trials (`ips trials --urdf ... --home
-/// 0,0.3,-0.2,0,0.6,0`), where its support package is (see `abb_support_dir`).
-fn abb_in_trial_scene() -> Option<(ArticulatedBody, RobotScene)> {
-    let Some(dir) = abb_support_dir() else {
-        eprintln!(
-            "skipped: the ABB IRB 1600 support package is not here (ABB_IRB1600_SUPPORT_DIR)"
-        );
-        return None;
-    };
-    let mut packages = align_core::kinematics::PackageMap::new();
-    packages.insert("abb_irb1600_support".to_owned(), dir.clone());
-    let model = align_core::kinematics::RobotModel::from_urdf_file(
-        &dir.join("urdf/irb1600_6_12.urdf"),
-        &packages,
-    )
-    .expect("the ABB URDF loads");
-    let body = ArticulatedBody::from_model(&model).expect("the ABB has surfaces");
-    let scene = RobotScene {
-        world_from_root: cell_pose(),
-        q: vec![0.0, 0.3, -0.2, 0.0, 0.6, 0.0],
-        scan: RobotScanOptions::default(),
-    };
-    Some((body, scene))
-}
-
 /// Runs `trials` of the ABB at `delta_m`: every link within 1 mm but the flange, whose spin
 /// shows on a few rim points only (the fit reports it unobserved, which the tally counts apart
 /// from failures).
 fn abb_trials_succeed(delta_m: f64, trials: &[usize]) {
-    let Some((body, scene)) = abb_in_trial_scene() else {
+    let Some(body) = abb_irb1600() else {
         return;
+    };
+    let scene = RobotScene {
+        world_from_root: cell_pose(),
+        q: ABB_TRIAL_HOME.to_vec(),
+        scan: RobotScanOptions::default(),
     };
     for &trial in trials {
         for row in &hierarchical_trial(&body, &scene, delta_m, trial) {
@@ -431,7 +403,7 @@ fn abb_trials_succeed(delta_m: f64, trials: &[usize]) {
 /// --home 0,0.3,-0.2,0,0.6,0`) ended with joint 4 0.9 rad off and joint 5 making up for it
 /// (link_4 24-33 mm off) until a local fit above 0.18 of the robot's radius took a second look
 /// at every joint; trial 45 lost joint 5 the same way the 500 mm trials did. Runs only where the
-/// third-party robot is (see `abb_support_dir`).
+/// third-party robot is (see `common/abb.rs`).
 #[test]
 fn the_abb_wrists_lost_at_200_mm_are_found() {
     abb_trials_succeed(0.2, &[25, 38, 43, 45]);

@@ -300,10 +300,9 @@ pub fn align_robot(
     };
     let (spent, mut state) = refine_exactly(&mut world_from_root, &mut q);
     iterations += spent;
-    // Below a fraction of the robot's radius the searches from the start settle every joint in
-    // its basin (every trial measured): the look would only cost time there.
-    let look_again = global || (start_mesh.is_some() && !near_start);
-    if look_again {
+    // From a near start the searches settle every joint in its basin (every trial measured):
+    // the look would only cost time there. (A global start is never near.)
+    if start_mesh.is_some() && !near_start {
         let looked_from = q.clone();
         iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
         // A look that moved a joint may have moved a wrist to the true pose's twin (a
