@@ -87,6 +87,12 @@ pub struct PcaOptions {
     /// saved, for a caller that only needs the pose brought near and tells twins apart itself
     /// (the robot fit's rigid stage of the whole robot).
     pub twin_search: bool,
+    /// After the exploration, the run on the fine keypoints from three `delta_min_m` (default).
+    /// Off: the exploration's best end is the pose (its runs end in the `delta_min_m` band, on
+    /// keypoints of three voxels), for a caller that refines it itself and cannot use a finer
+    /// one: the robot fit's rigid stage from a near start, whose joints are still wrong while
+    /// it runs. Without an exploration (`starts` 0) the run is made anyway.
+    pub fine_run: bool,
 }
 
 impl Default for PcaOptions {
@@ -111,6 +117,7 @@ impl Default for PcaOptions {
             polish: true,
             without_large_planes: true,
             twin_search: true,
+            fine_run: true,
         }
     }
 }
@@ -234,6 +241,77 @@ pub fn align_cloud(
     options: &PcaOptions,
 ) -> Result<PcaResult, PcaError> {
     let started = Instant::now();
+    let Located {
+        run,
+        keypoints,
+        starts,
+        uniqueness,
+    } = locate(mesh, cloud, base_from_part_start, delta0_m, options)?;
+    let bounds = mesh.bounds();
+    let final_matches = correspond(
+        mesh,
+        &keypoints,
+        &run.pose,
+        run.delta,
+        (&bounds.0, &bounds.1),
+        Lookup::exact(options.parallel),
+        &mut [],
+    );
+    let (sum, max) = final_matches.iter().fold((0.0, 0.0f64), |(sum, max), m| {
+        (sum + m.distance * m.distance, max.max(m.distance))
+    });
+    Ok(PcaResult {
+        alignment: Alignment {
+            base_from_part: run.pose,
+            iterations: run.iterations,
+            converged: run.converged,
+            rms_m: (sum / final_matches.len().max(1) as f64).sqrt(),
+            max_m: max,
+            starts,
+            time_s: started.elapsed().as_secs_f64(),
+        },
+        keypoints: keypoints.len(),
+        kept: final_matches.len(),
+        final_delta_m: run.delta,
+        uniqueness,
+    })
+}
+
+/// The pose [`align_cloud`] finds, without the residuals it reports (every keypoint matched
+/// once more, exactly: about a twentieth of a 100 mm robot fit, for figures its rigid stage
+/// never reads).
+pub(crate) fn align_cloud_pose(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    base_from_part_start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Result<Isometry3<f64>, PcaError> {
+    Ok(
+        locate(mesh, cloud, base_from_part_start, delta0_m, options)?
+            .run
+            .pose,
+    )
+}
+
+/// What [`locate`] found: the run that ended at the pose, the keypoints, the starts tried and
+/// the uniqueness.
+struct Located {
+    run: ScheduleRun,
+    keypoints: Vec<Point3<f64>>,
+    starts: usize,
+    uniqueness: Option<Uniqueness>,
+}
+
+/// [`align_cloud`] up to its pose: the checks, the exploration, the run, the runs about the
+/// found pose and the polish.
+fn locate(
+    mesh: &Mesh,
+    cloud: &[Point3<f64>],
+    base_from_part_start: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Result<Located, PcaError> {
     if cloud.is_empty() {
         return Err(PcaError::EmptyCloud);
     }
@@ -318,7 +396,17 @@ pub fn align_cloud(
                 .map(|(voxel_m, points)| (*voxel_m, points.as_slice())),
         )
         .collect();
-    let mut run = run_schedule_on_levels(mesh, &levels, &start, schedule_from, options, 1.0);
+    // The exploration's best end (`start` now) ended its run in the narrowest band.
+    let mut run = if coarse.is_some() && !options.fine_run {
+        ScheduleRun {
+            pose: start,
+            iterations: 0,
+            converged: true,
+            delta: options.delta_min_m.min(delta0_m),
+        }
+    } else {
+        run_schedule_on_levels(mesh, &levels, &start, schedule_from, options, 1.0)
+    };
     let mut uniqueness_found = None;
     if let Some(coarse) = coarse.as_ref().filter(|_| options.twin_search) {
         // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
@@ -372,31 +460,10 @@ pub fn align_cloud(
             delta: polished.band_m,
         };
     }
-    let final_matches = correspond(
-        mesh,
-        &keypoints,
-        &run.pose,
-        run.delta,
-        (&bounds.0, &bounds.1),
-        Lookup::exact(options.parallel),
-        &mut [],
-    );
-    let (sum, max) = final_matches.iter().fold((0.0, 0.0f64), |(sum, max), m| {
-        (sum + m.distance * m.distance, max.max(m.distance))
-    });
-    Ok(PcaResult {
-        alignment: Alignment {
-            base_from_part: run.pose,
-            iterations: run.iterations,
-            converged: run.converged,
-            rms_m: (sum / final_matches.len().max(1) as f64).sqrt(),
-            max_m: max,
-            starts,
-            time_s: started.elapsed().as_secs_f64(),
-        },
-        keypoints: keypoints.len(),
-        kept: final_matches.len(),
-        final_delta_m: run.delta,
+    Ok(Located {
+        run,
+        keypoints,
+        starts,
         uniqueness: uniqueness_found,
     })
 }

@@ -41,7 +41,10 @@
 //! When delta is at most 0.18 of the robot's radius (at the start joints) the start is near:
 //! the searches from it settle every joint in its basin, so the beam keeps `near_beam_width`
 //! states and follows two values of a joint from each, the joints are searched
-//! `near_search_passes` times, and there is no second look.
+//! `near_search_passes` times, and there is no second look. The rigid alignment of the whole
+//! robot ends with its exploration's run (coarse keypoints, down to its narrowest band) rather
+//! than running again on the fine keypoints (`PcaOptions::fine_run`): with the joints still
+//! wrong it cannot come closer, and the searches settle the base with them.
 //!
 //! When delta exceeds the robot's radius (at the start joints) the start is not local: the
 //! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
@@ -81,7 +84,7 @@ use nalgebra::{Isometry3, Point3};
 
 use super::body::ArticulatedBody;
 use crate::geometry::Mesh;
-use crate::registration::pca::{PcaError, align_cloud};
+use crate::registration::pca::{PcaError, PcaOptions, align_cloud_pose};
 use crate::registration::sampling::voxel_representatives;
 use base::round_base_axis;
 use context::{FitContext, Keypoints};
@@ -213,13 +216,16 @@ pub fn align_robot(
     let near_start = start_mesh
         .as_ref()
         .is_some_and(|mesh| delta_m <= NEAR_DELTA_PER_RADIUS * mesh.radius_m());
+    // From a near start the exploration's run on the coarse keypoints brings the base near
+    // enough: the searches and refinements that follow settle it with the joints, and the
+    // rigid run on the fine keypoints was a third of a 100 mm fit (`articulated_starts`).
+    let base_options = PcaOptions {
+        fine_run: options.base.fine_run && !near_start,
+        ..options.base.clone()
+    };
     let whole = match &start_mesh {
-        Some(mesh) => {
-            align_cloud(mesh, &near, world_from_root_start, delta_m, &options.base)
-                .map_err(RobotFitError::Base)?
-                .alignment
-                .base_from_part
-        }
+        Some(mesh) => align_cloud_pose(mesh, &near, world_from_root_start, delta_m, &base_options)
+            .map_err(RobotFitError::Base)?,
         None => *world_from_root_start,
     };
     let fit = FitContext {
