@@ -84,6 +84,8 @@ pub fn thesis_pca_options() -> PcaOptions {
         voxel_centroids: true,
         starts: 0,
         polish: false,
+        // Its stopping criterion (2.1.4): the last 19 poses within the tolerance.
+        window: 19,
         ..PcaOptions::default()
     }
 }
