@@ -218,7 +218,8 @@ pub fn align_robot(
         .is_some_and(|mesh| delta_m <= NEAR_DELTA_PER_RADIUS * mesh.radius_m());
     // From a near start the exploration's run on the coarse keypoints brings the base near
     // enough: the searches and refinements that follow settle it with the joints, and the
-    // rigid run on the fine keypoints was a third of a 100 mm fit (`articulated_starts`).
+    // rigid run on the fine keypoints took 10-30 ms of a 115 ms fit at 100 mm (a timing probe
+    // of `articulated_starts`, docs/BENCHMARKS.md).
     let base_options = PcaOptions {
         fine_run: options.base.fine_run && !near_start,
         ..options.base.clone()
