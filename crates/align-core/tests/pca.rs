@@ -51,6 +51,13 @@ fn cluttered_scan(mesh: &Mesh, truth: &Isometry3<f64>) -> Vec<Point3<f64>> {
     scan_part(mesh, truth, &scan)
 }
 
+/// `truth` displaced by the thesis's scheme within `delta_m` (seeded), about the part's centroid.
+fn displaced_start(mesh: &Mesh, truth: &Isometry3<f64>, seed: u64, delta_m: f64) -> Isometry3<f64> {
+    let mut rng = TrialRng::new(seed);
+    let displacement = random_displacement(&mut rng, delta_m, mesh.radius_m());
+    displace_about_centroid(truth, mesh, &displacement)
+}
+
 fn errors(result: &Isometry3<f64>, truth: &Isometry3<f64>) -> (f64, f64) {
     (
         (result.translation.vector - truth.translation.vector).norm(),
@@ -238,9 +245,7 @@ fn a_symmetric_part_is_ambiguous_and_an_asymmetric_one_unique() {
         let truth = truth();
         let cloud = cluttered_scan(&mesh, &truth);
         // A start off by 200 mm (the thesis's scheme).
-        let mut rng = TrialRng::new(5);
-        let displacement = random_displacement(&mut rng, 0.2, mesh.radius_m());
-        let start = displace_about_centroid(&truth, &mesh, &displacement);
+        let start = displaced_start(&mesh, &truth, 5, 0.2);
         let result = align_cloud(&mesh, &cloud, &start, 0.2, &PcaOptions::default()).unwrap();
         let found = result.uniqueness.clone().expect("the exploration ran");
         println!(
@@ -310,9 +315,7 @@ fn without_the_twin_search_the_pose_is_found_and_no_uniqueness_claimed() {
     let mesh = step_block();
     let truth = truth();
     let cloud = cluttered_scan(&mesh, &truth);
-    let mut rng = TrialRng::new(5);
-    let displacement = random_displacement(&mut rng, 0.2, mesh.radius_m());
-    let start = displace_about_centroid(&truth, &mesh, &displacement);
+    let start = displaced_start(&mesh, &truth, 5, 0.2);
     let options = PcaOptions {
         twin_search: false,
         ..PcaOptions::default()
@@ -331,9 +334,7 @@ fn without_the_fine_run_the_exploration_brings_the_part_near() {
     let mesh = step_block();
     let truth = truth();
     let cloud = cluttered_scan(&mesh, &truth);
-    let mut rng = TrialRng::new(7);
-    let displacement = random_displacement(&mut rng, 0.05, mesh.radius_m());
-    let start = displace_about_centroid(&truth, &mesh, &displacement);
+    let start = displaced_start(&mesh, &truth, 7, 0.05);
     let rigid_stage = PcaOptions {
         fine_run: false,
         ..RobotFitOptions::default().base
