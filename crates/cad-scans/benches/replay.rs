@@ -1,0 +1,215 @@
+//! Replays the scenes a `cad-scans` run wrote (scene.json, cloud.ply, part.stl and truth.json
+//! per trial folder) through ips's Point Cloud Alignment, without scanning them again: the same
+//! scans timed again and again, for speed work and profiling.
+//!
+//! ```text
+//! target/release/cad-scans --scans 40 --ips local --no-peers --out /tmp/cs40
+//! cargo bench -p cad-scans --bench replay -- --scenes /tmp/cs40 --runs 3 [--full] [--json]
+//! ```
+//!
+//! Prints, per delta, the successes (pose distance under 1 mm, as cad-scans scores) and the
+//! median over the scenes of each scene's fastest run. The mesh and the cloud are read before
+//! the clock starts, as `cad-scans` and the peers time them.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use align_core::geometry::Mesh;
+use align_core::io::{read_cloud, read_mesh};
+use align_core::registration::convergence::pose_distance;
+use align_core::registration::pca::align_cloud;
+use align_core::trials::SUCCESS_THRESHOLD_M;
+use align_service::jobs::cloud::cloud_options;
+use cad_scans::files::{SceneFile, isometry_from_rows};
+use nalgebra::{Isometry3, Point3};
+
+struct Args {
+    scenes: PathBuf,
+    runs: usize,
+    full: bool,
+    json: bool,
+}
+
+const USAGE: &str = "replay --scenes DIR [--runs N (3)] [--full] [--json]
+  DIR: a cad-scans --out folder (trial-NNNN/ each with scene.json, cloud.ply, part.stl, truth.json)
+  --full: the whole alignment (exploration and uniqueness) instead of the local stage";
+
+fn parse_args() -> Result<Args, String> {
+    let mut args = Args {
+        scenes: PathBuf::from("target/cad-scans"),
+        runs: 3,
+        full: false,
+        json: false,
+    };
+    let mut given = std::env::args().skip(1);
+    while let Some(flag) = given.next() {
+        match flag.as_str() {
+            "--scenes" => args.scenes = given.next().ok_or("--scenes needs a folder")?.into(),
+            "--runs" => {
+                args.runs = given
+                    .next()
+                    .and_then(|n| n.parse().ok())
+                    .filter(|&n| n > 0)
+                    .ok_or("--runs needs a count of at least 1")?
+            }
+            "--full" => args.full = true,
+            "--json" => args.json = true,
+            // cargo bench passes --bench.
+            "--bench" => {}
+            "--help" | "-h" => return Err(USAGE.into()),
+            other => return Err(format!("unknown argument '{other}'\n{USAGE}")),
+        }
+    }
+    Ok(args)
+}
+
+struct Replayed {
+    scene: SceneFile,
+    mesh: Mesh,
+    cloud: Vec<Point3<f64>>,
+    truth: Isometry3<f64>,
+}
+
+fn load(dir: &Path) -> Result<Replayed, String> {
+    let read = |name: &str| {
+        std::fs::read_to_string(dir.join(name))
+            .map_err(|e| format!("{}: {e}", dir.join(name).display()))
+    };
+    let scene: SceneFile = serde_json::from_str(&read("scene.json")?)
+        .map_err(|e| format!("{}/scene.json: {e}", dir.display()))?;
+    let truth: [[f64; 4]; 4] = serde_json::from_str(&read("truth.json")?)
+        .map_err(|e| format!("{}/truth.json: {e}", dir.display()))?;
+    let soup = read_mesh(&dir.join(&scene.mesh), 1.0).map_err(|e| e.to_string())?;
+    let mesh = Mesh::new(&soup.vertices, &soup.triangles).map_err(|e| e.to_string())?;
+    let cloud = read_cloud(&dir.join(&scene.cloud), 1.0).map_err(|e| e.to_string())?;
+    Ok(Replayed {
+        scene,
+        mesh,
+        cloud,
+        truth: isometry_from_rows(&truth),
+    })
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
+fn main() {
+    let args = match parse_args() {
+        Ok(args) => args,
+        Err(message) => {
+            eprintln!("{message}");
+            std::process::exit(2);
+        }
+    };
+    let mut dirs: Vec<PathBuf> = match std::fs::read_dir(&args.scenes) {
+        Ok(entries) => entries
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.join("scene.json").is_file())
+            .collect(),
+        Err(error) => {
+            eprintln!("{}: {error}", args.scenes.display());
+            std::process::exit(2);
+        }
+    };
+    dirs.sort();
+    if dirs.is_empty() {
+        eprintln!(
+            "no trial folders in {} (write some with cad-scans --out)",
+            args.scenes.display()
+        );
+        std::process::exit(2);
+    }
+    let options = cloud_options(false, None, !args.full);
+    // (delta mm, succeeded, fastest run s) per scene, and each scene's record for --json.
+    let mut results: Vec<(f64, bool, f64)> = Vec::new();
+    let mut scenes = Vec::new();
+    for (index, dir) in dirs.iter().enumerate() {
+        let replayed = match load(dir) {
+            Ok(replayed) => replayed,
+            Err(message) => {
+                eprintln!("skipped: {message}");
+                continue;
+            }
+        };
+        let start = isometry_from_rows(&replayed.scene.start);
+        let mut fastest_s = f64::INFINITY;
+        let mut error_mm = f64::NAN;
+        for _ in 0..args.runs {
+            let clock = Instant::now();
+            let result = align_cloud(
+                &replayed.mesh,
+                &replayed.cloud,
+                &start,
+                replayed.scene.delta_m,
+                &options,
+            );
+            fastest_s = fastest_s.min(clock.elapsed().as_secs_f64());
+            error_mm = result.map_or(f64::NAN, |r| {
+                1e3 * pose_distance(
+                    &r.alignment.base_from_part,
+                    &replayed.truth,
+                    replayed.mesh.radius_m(),
+                )
+            });
+        }
+        let succeeded = error_mm < SUCCESS_THRESHOLD_M * 1e3;
+        results.push((replayed.scene.delta_m * 1e3, succeeded, fastest_s));
+        scenes.push(serde_json::json!({
+            "id": replayed.scene.id,
+            "part": replayed.scene.part,
+            "delta_mm": replayed.scene.delta_m * 1e3,
+            "error_mm": error_mm,
+            "succeeded": succeeded,
+            "time_s": fastest_s,
+        }));
+        if index % 10 == 9 || index + 1 == dirs.len() {
+            eprint!("\rreplay: {}/{}", index + 1, dirs.len());
+        }
+    }
+    eprintln!();
+    let mut deltas: Vec<f64> = results.iter().map(|r| r.0).collect();
+    deltas.sort_by(f64::total_cmp);
+    deltas.dedup();
+    let rows: Vec<(f64, usize, usize, f64)> = deltas
+        .iter()
+        .map(|&delta| {
+            let at: Vec<_> = results.iter().filter(|r| r.0 == delta).collect();
+            let mut times: Vec<f64> = at.iter().map(|r| r.2).collect();
+            let successes = at.iter().filter(|r| r.1).count();
+            (delta, successes, at.len(), median(&mut times))
+        })
+        .collect();
+    if args.json {
+        let rows: Vec<_> = rows
+            .iter()
+            .map(|(delta, successes, scans, median_s)| {
+                serde_json::json!({"delta_mm": delta, "succeeded": successes, "scans": scans, "median_time_s": median_s})
+            })
+            .collect();
+        println!(
+            "{}",
+            serde_json::json!({ "full": args.full, "runs": args.runs, "rows": rows, "scenes": scenes })
+        );
+        return;
+    }
+    println!(
+        "ips {} (fastest of {} runs per scene)",
+        if args.full { "full" } else { "local" },
+        args.runs
+    );
+    println!("| delta (mm) | succeeded | median time (s) |");
+    println!("| ---: | ---: | ---: |");
+    for (delta, successes, scans, median_s) in rows {
+        println!("| {delta:.0} | {successes}/{scans} | {median_s:.4} |");
+    }
+}
