@@ -352,3 +352,70 @@ fn without_the_fine_run_the_exploration_brings_the_part_near() {
     let (shift, turn) = errors(&result.alignment.base_from_part, &truth);
     assert!(shift < 5e-3 && turn < 3e-2, "{shift} m, {turn} rad");
 }
+
+#[test]
+fn a_local_run_is_the_same_whatever_lies_beyond_its_reach() {
+    // The local stage bins only the points a run from the start can reach (the box's half
+    // diagonal and three delta0 from its centre): clutter a few metres off changes nothing, not
+    // even the last bit of the pose.
+    let mesh = step_block();
+    let truth = truth();
+    let cloud = cluttered_scan(&mesh, &truth);
+    let far_clutter: Vec<Point3<f64>> = (0..20_000)
+        .map(|i| {
+            let t = i as f64 * 0.37;
+            Point3::new(
+                4.0 + (t * 0.11).sin(),
+                -3.0 + (t * 0.07).cos(),
+                (t * 0.05).sin(),
+            )
+        })
+        .collect();
+    let with_far: Vec<Point3<f64>> = cloud.iter().chain(&far_clutter).copied().collect();
+    let local = PcaOptions {
+        starts: 0,
+        ..PcaOptions::default()
+    };
+    for (seed, delta_m) in [(3, 0.05), (4, 0.3)] {
+        let start = displaced_start(&mesh, &truth, seed, delta_m);
+        let alone = align_cloud(&mesh, &cloud, &start, delta_m, &local).unwrap();
+        let among = align_cloud(&mesh, &with_far, &start, delta_m, &local).unwrap();
+        assert_eq!(
+            alone.alignment.base_from_part, among.alignment.base_from_part,
+            "delta {delta_m} m"
+        );
+        assert_eq!(alone.alignment.iterations, among.alignment.iterations);
+        // The keypoints count what was binned: the far clutter was not.
+        assert_eq!(alone.keypoints, among.keypoints, "delta {delta_m} m");
+    }
+}
+
+#[test]
+fn a_local_run_matches_approximately_only_in_bands_wider_than_5_cm() {
+    let mesh = step_block();
+    let truth = truth();
+    let cloud = cluttered_scan(&mesh, &truth);
+    let with_slack = PcaOptions {
+        starts: 0,
+        ..PcaOptions::default()
+    };
+    let exact = PcaOptions {
+        wide_band_slack: false,
+        ..with_slack.clone()
+    };
+    // From 50 mm every band is exact either way: the same pose to the last bit.
+    let start = displaced_start(&mesh, &truth, 5, 0.05);
+    let a = align_cloud(&mesh, &cloud, &start, 0.05, &with_slack).unwrap();
+    let b = align_cloud(&mesh, &cloud, &start, 0.05, &exact).unwrap();
+    assert_eq!(a.alignment.base_from_part, b.alignment.base_from_part);
+    // From 150 mm the first bands differ, and both reach the truth.
+    let start = displaced_start(&mesh, &truth, 6, 0.15);
+    let a = align_cloud(&mesh, &cloud, &start, 0.15, &with_slack).unwrap();
+    let b = align_cloud(&mesh, &cloud, &start, 0.15, &exact).unwrap();
+    assert_ne!(a.alignment.base_from_part, b.alignment.base_from_part);
+    for (name, result) in [("with the slack", &a), ("exact", &b)] {
+        let (position, rotation) = errors(&result.alignment.base_from_part, &truth);
+        let d = position.hypot(rotation * mesh.radius_m());
+        assert!(d < 1e-3, "{name}: pose distance {d:e} m");
+    }
+}

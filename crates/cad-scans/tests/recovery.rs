@@ -3,6 +3,12 @@
 //! `cad-scans` runner makes them (`cad-scans --no-abb --scans 3 --seed 20 --no-peers` prints the
 //! same trials). The counts asserted are what ips achieved when the test was written; they are
 //! a floor for regressions, not a target (last raised 2026-11-26); see docs/cad-scan-trials.md.
+//!
+//! The scenes changed on 2026-11-27 (fifth session), when the corpus's seeds were mixed
+//! properly (`trial_seed`: 40 of seed 20's 200 scans were seed 31's under other numbers). The
+//! floors at 100, 500 and 1000 mm were measured again on the new scenes, with the full alignment
+//! as it was (that session's changes reach only the local stage); the comments below say what
+//! the old scenes gave.
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
 use std::path::PathBuf;
@@ -74,13 +80,14 @@ fn at_50_mm_every_scan_is_recovered_and_none_is_called_ambiguous() {
 }
 
 #[test]
-fn at_100_mm_every_scan_is_recovered() {
-    // Measured: 3/3 since the polishing run and the large-plane rule (issue 20, 2026-11-26;
-    // 1/3 before): the xArm7 link that ended 1.1 mm off (the floor and mixed pixels in the
-    // schedule's last band) is polished to 0.15 mm; the xArm7 base and the SO-ARM100 upper arm
-    // are found and flagged ambiguous (0.10 and 0.08 mm).
+fn at_100_mm_two_scans_in_three_are_recovered_and_the_miss_reported_ambiguous() {
+    // Measured on the new scenes: the xArm7 link4 0.15 mm and base 0.14 mm off (the base flagged
+    // ambiguous); the SO-ARM100 upper arm, lying, 246 mm off and flagged ambiguous. The old
+    // scenes gave 3/3 since the polishing run and the large-plane rule (issue 20, 2026-11-26;
+    // 1/3 before).
     let results = trials_at(100.0);
-    assert_eq!(successes(&results), 3, "{}", describe(&results));
+    assert!(successes(&results) >= 2, "{}", describe(&results));
+    assert_no_confident_wrong_pose(&results, 0.002);
 }
 
 #[test]
@@ -108,29 +115,28 @@ fn assert_no_confident_wrong_pose(results: &[(Trial, Outcome)], near_m: f64) {
 // 500 and 1000 mm: 2-13 s a scan in the test profile since the exploration's far queries are
 // approximate (35-120 s before).
 #[test]
-fn at_500_mm_two_scans_in_three_are_recovered_and_the_miss_is_reported_ambiguous() {
-    // Measured: 2/3 since the polishing run and the large-plane rule (0/3 before): the
-    // SO-ARM100 lower arm 0.36 mm off (flagged ambiguous), the xArm7 link2 0.03 mm; the
-    // SO-ARM100 upper arm 345 mm off, flagged ambiguous.
+fn at_500_mm_one_scan_in_three_is_recovered_and_the_misses_reported_ambiguous() {
+    // Measured on the new scenes: the xArm7 link2 0.04 mm off; the SO-ARM100 upper arm 274 mm
+    // and lower arm 419 mm off, each flagged ambiguous. The old scenes gave 2/3 since the
+    // polishing run and the large-plane rule (0/3 before).
     let results = trials_at(500.0);
-    assert!(successes(&results) >= 2, "{}", describe(&results));
+    assert!(successes(&results) >= 1, "{}", describe(&results));
     assert_no_confident_wrong_pose(&results, 0.002);
 }
 
 #[test]
-fn at_1000_mm_two_scans_in_three_are_recovered_none_refused_and_the_miss_reported_ambiguous() {
-    // Measured: 2/3 since the polishing run and the large-plane rule (1/3 since the detected
-    // poses are chosen by the consensus instead of their votes, 0/3 before): the xArm7 link2
-    // 0.04 mm and link4 0.16 mm off; the SO-ARM100 lower arm 241 mm off, flagged ambiguous.
-    // That arm's start lies 0.5 m below the floor: every scan point near it is nearest to one
-    // of its edges, and ips used to refuse it ("only 1 cloud points lie within delta"); the
-    // check now counts those points, and the alignment is tried.
+fn at_1000_mm_one_scan_in_three_is_recovered_none_refused_and_the_misses_reported_ambiguous() {
+    // Measured on the new scenes: the xArm7 link4 0.06 mm off; the SO-ARM100 lower arm 333 mm
+    // and the xArm7 link2 418 mm off, each flagged ambiguous. The old scenes gave 2/3; one of
+    // them had an arm's start 0.5 m below the floor, where every scan point near it is nearest
+    // to one of its edges, and ips used to refuse it ("only 1 cloud points lie within delta"):
+    // the check counts those points, and no scan is refused.
     let results = trials_at(1000.0);
     assert!(
         results.iter().all(|(_, o)| o.refused.is_none()),
         "{}",
         describe(&results)
     );
-    assert!(successes(&results) >= 2, "{}", describe(&results));
+    assert!(successes(&results) >= 1, "{}", describe(&results));
     assert_no_confident_wrong_pose(&results, 0.002);
 }

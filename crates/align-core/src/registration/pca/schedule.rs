@@ -143,6 +143,42 @@ pub(super) struct ScheduleRun {
     pub(super) delta: f64,
 }
 
+/// How a run's lookups find each keypoint's surface point: up to `factor` times farther than the
+/// closest (see [`Lookup::slack`]) while the band is wider than `exact_within_band_m`, exactly
+/// from then on.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RunSlack {
+    pub(super) factor: f64,
+    pub(super) exact_within_band_m: f64,
+    /// See [`Lookup::exact_within_band_fraction`].
+    pub(super) exact_within_band_fraction: f64,
+}
+
+impl RunSlack {
+    pub(super) const EXACT: Self = Self {
+        factor: 1.0,
+        exact_within_band_m: f64::INFINITY,
+        exact_within_band_fraction: 0.0,
+    };
+
+    /// `factor` in every band.
+    pub(super) fn always(factor: f64) -> Self {
+        Self {
+            factor,
+            exact_within_band_m: 0.0,
+            exact_within_band_fraction: 0.0,
+        }
+    }
+
+    fn at_band(&self, band_m: f64) -> f64 {
+        if band_m > self.exact_within_band_m {
+            self.factor
+        } else {
+            1.0
+        }
+    }
+}
+
 /// One run of the thesis's loop on `keypoints` alone (no coarser levels).
 pub(super) fn run_schedule(
     mesh: &Mesh,
@@ -152,7 +188,14 @@ pub(super) fn run_schedule(
     options: &PcaOptions,
     slack: f64,
 ) -> ScheduleRun {
-    run_schedule_on_levels(mesh, &[(0.0, keypoints)], start, delta0_m, options, slack)
+    run_schedule_on_levels(
+        mesh,
+        &[(0.0, keypoints)],
+        start,
+        delta0_m,
+        options,
+        RunSlack::always(slack),
+    )
 }
 
 /// The keypoints at the coarser voxel sizes a halving run from `delta0_m` can use (voxel,
@@ -185,13 +228,9 @@ pub(super) fn run_schedule_on_levels(
     start: &Isometry3<f64>,
     delta0_m: f64,
     options: &PcaOptions,
-    slack: f64,
+    slack: RunSlack,
 ) -> ScheduleRun {
     let (lower, upper) = mesh.bounds();
-    let lookup = Lookup {
-        slack,
-        ..Lookup::exact(options.parallel)
-    };
     let mut hints: Vec<Vec<u32>> = levels
         .iter()
         .map(|(_, keypoints)| vec![NO_HINT; keypoints.len()])
@@ -220,6 +259,11 @@ pub(super) fn run_schedule_on_levels(
             .unwrap_or(0);
         let reachable = &mut reachable[level];
         reachable.update(levels[level].1, &pose, &mut hints[level]);
+        let lookup = Lookup {
+            slack: slack.at_band(delta),
+            exact_within_band_fraction: slack.exact_within_band_fraction,
+            ..Lookup::exact(options.parallel)
+        };
         let matches = correspond(
             mesh,
             &reachable.points,

@@ -86,6 +86,8 @@ pub fn thesis_pca_options() -> PcaOptions {
         polish: false,
         // Its stopping criterion (2.1.4): the last 19 poses within the tolerance.
         window: 19,
+        // Its loop matches every band exactly.
+        wide_band_slack: false,
         ..PcaOptions::default()
     }
 }
