@@ -119,6 +119,8 @@ pub fn cloud_options(
         },
         schedule: schedule.unwrap_or(defaults.schedule),
         starts: if local { 0 } else { defaults.starts },
+        // The thesis's SVD step asks for its loop: every band matched exactly.
+        wide_band_slack: !point_to_point,
         ..defaults
     }
 }

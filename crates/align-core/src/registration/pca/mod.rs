@@ -515,9 +515,10 @@ fn locate(
 
 /// The points of `cloud` a local run from `start` can match: a run matches only keypoints within
 /// its band of the part's box, and the box's centre moves by about delta0 on the way to the truth
-/// (the user's bound). Points farther than the box's half diagonal and three delta0 from its
-/// centre at the start are left out before the voxel grid is built, which cost a tenth of a
-/// 50 mm local alignment on the CAD scans when it binned the whole cell. A run that wanders
+/// (the user's bound). Points farther from the box's centre at the start than the schedule's
+/// filter reaches from a centre moved by twice delta0 (1.25 (h + sqrt(3) delta0) + 2 delta0, h
+/// the box's half diagonal) are left out before the voxel grid is built: binning the whole cell
+/// was a fifth of a 50 mm local alignment on the CAD scans. A run whose part has wandered
 /// farther than twice its bound has failed whatever it still sees.
 fn within_local_reach(
     mesh: &Mesh,
