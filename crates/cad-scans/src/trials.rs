@@ -60,6 +60,7 @@ pub enum CorpusError {
 }
 
 /// A seed for trial `index` at delta number `delta_index`: every trial its own scene.
+///
 /// The run's seed, the delta and the index go through the generator one after the other: when
 /// they were XOR-ed together first, scan `i` of seed 20 was scan `i ^ 11` of seed 31 (the same
 /// scene whenever the part matched: 40 of 200), so a second seed was not an independent corpus.
