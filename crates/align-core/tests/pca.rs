@@ -390,11 +390,8 @@ fn a_local_run_is_the_same_whatever_lies_beyond_its_reach() {
     }
 }
 
-#[test]
-fn a_local_run_matches_approximately_only_in_bands_wider_than_5_cm() {
-    let mesh = step_block();
-    let truth = truth();
-    let cloud = cluttered_scan(&mesh, &truth);
+/// The local stage (no exploration) as it runs by default, and with every band matched exactly.
+fn local_with_and_without_slack() -> (PcaOptions, PcaOptions) {
     let with_slack = PcaOptions {
         starts: 0,
         ..PcaOptions::default()
@@ -403,6 +400,15 @@ fn a_local_run_matches_approximately_only_in_bands_wider_than_5_cm() {
         wide_band_slack: false,
         ..with_slack.clone()
     };
+    (with_slack, exact)
+}
+
+#[test]
+fn a_local_run_matches_approximately_only_in_bands_wider_than_5_cm() {
+    let mesh = step_block();
+    let truth = truth();
+    let cloud = cluttered_scan(&mesh, &truth);
+    let (with_slack, exact) = local_with_and_without_slack();
     // From 50 mm every band is exact either way: the same pose to the last bit.
     let start = displaced_start(&mesh, &truth, 5, 0.05);
     let a = align_cloud(&mesh, &cloud, &start, 0.05, &with_slack).unwrap();
@@ -429,14 +435,7 @@ fn on_the_step_block_the_wide_band_slack_loses_no_delta() {
     let mesh = step_block();
     let truth = truth();
     let cloud = cluttered_scan(&mesh, &truth);
-    let with_slack = PcaOptions {
-        starts: 0,
-        ..PcaOptions::default()
-    };
-    let exact = PcaOptions {
-        wide_band_slack: false,
-        ..with_slack.clone()
-    };
+    let (with_slack, exact) = local_with_and_without_slack();
     for delta_m in [0.1, 0.15, 0.2] {
         let successes = |options: &PcaOptions| {
             (0..30u64)

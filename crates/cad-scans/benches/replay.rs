@@ -21,6 +21,7 @@ use align_core::registration::pca::align_cloud;
 use align_core::trials::SUCCESS_THRESHOLD_M;
 use align_service::jobs::cloud::cloud_options;
 use cad_scans::files::{SceneFile, isometry_from_rows};
+use cad_scans::table::median;
 use nalgebra::{Isometry3, Point3};
 
 struct Args {
@@ -88,18 +89,6 @@ fn load(dir: &Path) -> Result<Replayed, String> {
         cloud,
         truth: isometry_from_rows(&truth),
     })
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 fn main() {

@@ -63,10 +63,7 @@ pub(super) fn correspond(
     let part_from_base = pose.inverse();
     let one = |point: &Point3<f64>, hint: Option<&mut u32>| -> Option<Match> {
         let in_part = part_from_base * point;
-        let inside_box = (0..3).all(|axis| {
-            in_part[axis] >= lower[axis] - delta && in_part[axis] <= upper[axis] + delta
-        });
-        if !inside_box {
+        if !in_grown_box(&in_part, lower, upper, delta) {
             return None;
         }
         let closest = if lookup.slack > 1.0 {
@@ -135,6 +132,16 @@ pub(super) fn correspond(
     }
 }
 
+/// The cut-off filter: `in_part` lies inside the part's box (`lower`, `upper`) grown by `delta`.
+fn in_grown_box(
+    in_part: &Point3<f64>,
+    lower: &Point3<f64>,
+    upper: &Point3<f64>,
+    delta: f64,
+) -> bool {
+    (0..3).all(|axis| in_part[axis] >= lower[axis] - delta && in_part[axis] <= upper[axis] + delta)
+}
+
 /// The keypoints within `delta` of the part's surface at `pose` (inside the part's box grown by
 /// `delta`, and nearer than `delta` to the surface, as [`correspond`] keeps them, edge points
 /// included): what the check that the scan holds enough of the part near the start counts. No
@@ -155,10 +162,7 @@ pub(super) fn near_surface(
     let part_from_base = pose.inverse();
     let near = |point: &&Point3<f64>| -> bool {
         let in_part = part_from_base * *point;
-        let inside_box = (0..3).all(|axis| {
-            in_part[axis] >= lower[axis] - delta && in_part[axis] <= upper[axis] + delta
-        });
-        if !inside_box {
+        if !in_grown_box(&in_part, &lower, &upper, delta) {
             return false;
         }
         if (in_part - box_centre).norm() + half_diagonal < delta {
