@@ -455,3 +455,49 @@ fn on_the_step_block_the_wide_band_slack_loses_no_delta() {
         );
     }
 }
+
+#[test]
+fn a_local_run_from_far_off_starts_in_a_band_of_the_parts_radius() {
+    // From 0.3 and 0.5 m off, a band of delta0 around the 20-triangle block (radius 146 mm)
+    // holds the floor, the box beside it and the outliers of the whole scene. Capped at the
+    // part's radius the local run must find the part at least as often: measured when written,
+    // 7 against 1 and 4 against 0 of 30 (1 against 0 from 1 m, not run here: slow and says
+    // little); the CAD scans 72 -> 75 and 75 -> 80 of 200 (docs/cad-scan-trials.md). From 50 mm,
+    // below the radius, nothing changes.
+    let mesh = step_block();
+    let truth = truth();
+    let cloud = cluttered_scan(&mesh, &truth);
+    let capped = PcaOptions {
+        starts: 0,
+        ..PcaOptions::default()
+    };
+    let from_delta0 = PcaOptions {
+        local_band_within_radius: false,
+        ..capped.clone()
+    };
+    let start = displaced_start(&mesh, &truth, 5, 0.05);
+    let a = align_cloud(&mesh, &cloud, &start, 0.05, &capped).unwrap();
+    let b = align_cloud(&mesh, &cloud, &start, 0.05, &from_delta0).unwrap();
+    assert_eq!(a.alignment.base_from_part, b.alignment.base_from_part);
+    for delta_m in [0.3, 0.5] {
+        let successes = |options: &PcaOptions| {
+            (0..30u64)
+                .filter(|seed| {
+                    let start = displaced_start(&mesh, &truth, seed * 11 + 3, delta_m);
+                    let result = align_cloud(&mesh, &cloud, &start, delta_m, options).unwrap();
+                    let (position, rotation) = errors(&result.alignment.base_from_part, &truth);
+                    position.hypot(rotation * mesh.radius_m()) < 1e-3
+                })
+                .count()
+        };
+        let (capped_found, delta0_found) = (successes(&capped), successes(&from_delta0));
+        eprintln!(
+            "{delta_m} m: first band the radius {capped_found}/30, delta0 {delta0_found}/30 (radius {:.3} m)",
+            mesh.radius_m()
+        );
+        assert!(
+            capped_found >= delta0_found,
+            "{delta_m} m: first band the radius {capped_found}/30, delta0 {delta0_found}/30"
+        );
+    }
+}

@@ -119,8 +119,9 @@ pub fn cloud_options(
         },
         schedule: schedule.unwrap_or(defaults.schedule),
         starts: if local { 0 } else { defaults.starts },
-        // The thesis's SVD step asks for its loop: every band matched exactly.
+        // The thesis's SVD step asks for its loop: every band matched exactly, from delta0.
         wide_band_slack: !point_to_point,
+        local_band_within_radius: !point_to_point,
         ..defaults
     }
 }

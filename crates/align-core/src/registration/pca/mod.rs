@@ -100,6 +100,11 @@ pub struct PcaOptions {
     /// (default; see `LOCAL_EXACT_WITHIN_BAND_M`). Off: every band exact, the thesis's loop as
     /// it was measured.
     pub wide_band_slack: bool,
+    /// Without an exploration (`starts` 0), the run's first band is at most the part's radius
+    /// (default): from a start half a metre or a metre off, a band of delta0 holds far more of
+    /// the floor and the fixtures than of the part, and they decide where the wide bands' steps
+    /// go (see `local_first_band`). Off: the first band is delta0, the thesis's loop.
+    pub local_band_within_radius: bool,
 }
 
 impl Default for PcaOptions {
@@ -132,6 +137,7 @@ impl Default for PcaOptions {
             twin_search: true,
             fine_run: true,
             wide_band_slack: true,
+            local_band_within_radius: true,
         }
     }
 }
@@ -412,6 +418,8 @@ fn locate(
         // The exploration ended within a few voxels of its optimum: refining from a wide band
         // again would only let the clutter back in.
         schedule_from = delta0_m.min(3.0 * options.delta_min_m);
+    } else if options.local_band_within_radius {
+        schedule_from = local_first_band(mesh, delta0_m, options);
     }
     // The given keypoints as the finest level, voxel 0 so that every band may use them.
     let coarser = coarser_levels(&keypoints, schedule_from, options);
@@ -511,6 +519,15 @@ fn locate(
         starts,
         uniqueness: uniqueness_found,
     })
+}
+
+/// The first band of a local run (no exploration): delta0, but at most the part's radius (and
+/// at least the last band). The peers' coarse-to-fine stages start at 0.3 m whatever the bound
+/// (crates/cad-scans/peers); measured on the CAD scans (`replay` bench, two corpora of 200,
+/// docs/cad-scan-trials.md): 72 -> 75 and 75 -> 80 successes, the 500 and 1000 mm medians
+/// halved or better; a cap of 0.75 or 1.5 radii gave 73 and 72 on the first corpus.
+fn local_first_band(mesh: &Mesh, delta0_m: f64, options: &PcaOptions) -> f64 {
+    delta0_m.min(mesh.radius_m().max(options.delta_min_m))
 }
 
 /// The points of `cloud` a local run from `start` can match: a run matches only keypoints within

@@ -86,8 +86,9 @@ pub fn thesis_pca_options() -> PcaOptions {
         polish: false,
         // Its stopping criterion (2.1.4): the last 19 poses within the tolerance.
         window: 19,
-        // Its loop matches every band exactly.
+        // Its loop matches every band exactly, from delta0.
         wide_band_slack: false,
+        local_band_within_radius: false,
         ..PcaOptions::default()
     }
 }
