@@ -4,6 +4,7 @@
 //! by voxel, so it is deterministic.
 
 use nalgebra::{Point3, Vector3};
+use rayon::slice::ParallelSliceMut;
 
 type VoxelKey = (i64, i64, i64);
 
@@ -24,15 +25,51 @@ struct Bins {
     ends: Vec<usize>,
 }
 
+/// A voxel index per axis packed in [`PACKED_BITS`] bits (offset by half their range), so that a
+/// key is one `u64` whose order is the keys' lexicographic order.
+const PACKED_BITS: u32 = 21;
+const PACKED_OFFSET: i64 = 1 << (PACKED_BITS - 1);
+
+/// `key` packed into one `u64` in the same order, or `None` when an index does not fit (a cloud
+/// kilometres wide at a millimetre voxel, or a non-finite point).
+fn packed((x, y, z): VoxelKey) -> Option<u64> {
+    let axis = |index: i64| {
+        let shifted = index.checked_add(PACKED_OFFSET)?;
+        (0..1 << PACKED_BITS)
+            .contains(&shifted)
+            .then_some(shifted as u64)
+    };
+    Some((axis(x)? << (2 * PACKED_BITS)) | (axis(y)? << PACKED_BITS) | axis(z)?)
+}
+
+/// Clouds at least this large are sorted on all cores.
+const PARALLEL_SORT_POINTS: usize = 8192;
+
 impl Bins {
     fn new(cloud: &[Point3<f64>], voxel_m: f64) -> Self {
-        let mut keyed: Vec<(VoxelKey, usize)> = cloud
+        // Packed keys: a pair of 16 bytes with one comparison instead of 32 bytes with three,
+        // sorted on all cores. A local alignment bins a cell's points near the part (20-40k)
+        // and its keypoints at two coarser voxels: 9 ms of a 60 ms 50 mm CAD scan's alignment.
+        let packed_keys: Option<Vec<(u64, usize)>> = cloud
             .iter()
             .enumerate()
-            .map(|(index, point)| (voxel_of(point, voxel_m), index))
+            .map(|(index, point)| Some((packed(voxel_of(point, voxel_m))?, index)))
             .collect();
-        // The index breaks ties, so the unstable sort keeps each voxel's points in cloud order.
-        keyed.sort_unstable();
+        match packed_keys {
+            Some(keyed) => Self::from_sorted(sorted(keyed)),
+            None => {
+                let keyed: Vec<(VoxelKey, usize)> = cloud
+                    .iter()
+                    .enumerate()
+                    .map(|(index, point)| (voxel_of(point, voxel_m), index))
+                    .collect();
+                Self::from_sorted(sorted(keyed))
+            }
+        }
+    }
+
+    /// From (key, index) pairs in order.
+    fn from_sorted<K: PartialEq>(keyed: Vec<(K, usize)>) -> Self {
         let ends = (1..=keyed.len())
             .filter(|&i| i == keyed.len() || keyed[i].0 != keyed[i - 1].0)
             .collect();
@@ -48,6 +85,17 @@ impl Bins {
             .zip(&self.ends)
             .map(|(start, &end)| &self.order[start..end])
     }
+}
+
+/// `keyed` in order. The index breaks ties, so the unstable sort keeps each voxel's points in
+/// cloud order.
+fn sorted<K: Ord + Send>(mut keyed: Vec<(K, usize)>) -> Vec<(K, usize)> {
+    if keyed.len() >= PARALLEL_SORT_POINTS {
+        keyed.par_sort_unstable();
+    } else {
+        keyed.sort_unstable();
+    }
+    keyed
 }
 
 fn centroid(cloud: &[Point3<f64>], members: &[usize]) -> Point3<f64> {
@@ -121,10 +169,12 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        let cloud: Vec<Point3<f64>> = (0..5000)
+        // Above the parallel sort's size; at 1e-7 m the indices (up to 5e6) do not pack and the
+        // tuples are sorted instead.
+        let cloud: Vec<Point3<f64>> = (0..3 * PARALLEL_SORT_POINTS)
             .map(|_| Point3::new(uniform(), uniform() * 0.3, uniform() * 0.1))
             .collect();
-        for voxel_m in [0.006, 0.02, 0.09] {
+        for voxel_m in [1e-7, 0.006, 0.02, 0.09] {
             let mut map: std::collections::BTreeMap<VoxelKey, Vec<usize>> = Default::default();
             for (index, point) in cloud.iter().enumerate() {
                 map.entry(voxel_of(point, voxel_m)).or_default().push(index);
@@ -135,5 +185,28 @@ mod tests {
             assert_eq!(grouped, expected, "voxel {voxel_m}");
         }
         assert_eq!(Bins::new(&[], 0.01).groups().count(), 0);
+    }
+
+    #[test]
+    fn packed_keys_order_as_the_keys_do_and_refuse_what_does_not_fit() {
+        let limit = PACKED_OFFSET;
+        let keys = [
+            (-limit, 0, 0),
+            (-1, limit - 1, -limit),
+            (-1, limit - 1, 5),
+            (0, -3, 7),
+            (0, -2, -limit),
+            (limit - 1, limit - 1, limit - 1),
+        ];
+        let packed_keys: Vec<u64> = keys.iter().map(|&k| packed(k).expect("fits")).collect();
+        assert!(packed_keys.windows(2).all(|pair| pair[0] < pair[1]));
+        for key in [
+            (limit, 0, 0),
+            (0, -limit - 1, 0),
+            (0, 0, i64::MAX),
+            (i64::MIN, 0, 0),
+        ] {
+            assert_eq!(packed(key), None, "{key:?}");
+        }
     }
 }
