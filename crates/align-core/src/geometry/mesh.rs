@@ -426,6 +426,12 @@ impl Mesh {
         Some(self.surface_point(query, found.triangle, &found.point.coords, found.feature))
     }
 
+    /// Whether some surface point lies within `max_distance_m` of `query` (mesh frame): a
+    /// descent that stops at the first triangle within it.
+    pub fn has_surface_within(&self, query: &Point3<f64>, max_distance_m: f64) -> bool {
+        self.facing_tree().any_within(query, max_distance_m)
+    }
+
     /// The closest surface point to `query` among the triangles whose unit normal lies within
     /// `cone_rad` of `facing` (the faces a probe approaching along `-facing` could touch), or
     /// `None` when the part has no such triangle. One descent of a tree that bounds normals as

@@ -148,7 +148,8 @@ fn in_grown_box(
 /// surface point is needed, so a keypoint whose distance to the box's centre plus the box's half
 /// diagonal is under `delta` (nearer than `delta` to every point of the part) is kept without a
 /// search: from a start a metre off, most of them, whose searches each opened much of the tree
-/// (25-35 ms of a 500-1000 mm local alignment on the CAD scans).
+/// (25-35 ms of a 500-1000 mm local alignment on the CAD scans). The others ask whether any
+/// triangle lies within `delta`, a descent that stops at the first one found.
 pub(super) fn near_surface(
     mesh: &Mesh,
     keypoints: &[Point3<f64>],
@@ -168,10 +169,7 @@ pub(super) fn near_surface(
         if (in_part - box_centre).norm() + half_diagonal < delta {
             return true;
         }
-        mesh.closest_point_within(&in_part, delta)
-            .is_some_and(|closest| {
-                (closest.signed_distance.abs() / delta * std::f64::consts::FRAC_PI_2).cos() > 0.0
-            })
+        mesh.has_surface_within(&in_part, delta)
     };
     if parallel {
         keypoints.par_iter().filter(near).copied().collect()
