@@ -5,11 +5,15 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use align_core::kinematics::{PackageMap, RobotModel};
 use serde_json::{Value, json};
+
+use common::Scratch;
 
 fn example(file: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -58,21 +62,20 @@ fn example_session_aligns_to_the_hidden_truth() {
     );
 }
 
-fn scratch_session(name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
+fn scratch_session(name: &str, edit: impl FnOnce(&mut Value)) -> Scratch {
     let mut session: Value =
         serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
     edit(&mut session);
     let folder =
         std::env::temp_dir().join(format!("cobot-align-align-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&folder).unwrap();
+    let scratch = Scratch::in_folder(folder, "session.json");
     // Paths in a session are relative to it: point them back at the example.
     session["robot"]["urdf"] = json!(example("../../robots/ur10.urdf").to_str().unwrap());
     if session["part"]["mesh"] == "step_block.stl" {
         session["part"]["mesh"] = json!(example("step_block.stl").to_str().unwrap());
     }
-    let path = folder.join("session.json");
-    std::fs::write(&path, session.to_string()).unwrap();
-    path
+    std::fs::write(&scratch, session.to_string()).unwrap();
+    scratch
 }
 
 fn assert_refused(path: &Path, reason: &str) {
@@ -91,6 +94,8 @@ fn bad_sessions_exit_2_with_the_reason() {
     );
     let garbage =
         std::env::temp_dir().join(format!("cobot-align-garbage-{}.json", std::process::id()));
+    // Removed when the test ends, passed or not.
+    let _garbage_file = Scratch::file(garbage.clone());
     std::fs::write(&garbage, "{ not json").unwrap();
     assert_refused(&garbage, "key must be a string");
     assert_refused(
@@ -121,7 +126,7 @@ fn bad_sessions_exit_2_with_the_reason() {
 
 /// The example session `name` with every inspection's joints replaced by the flange pose they
 /// give (UR10 forward kinematics), the robot block removed, written to a scratch folder.
-fn flange_only(name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
+fn flange_only(name: &str, edit: impl FnOnce(&mut Value)) -> Scratch {
     let mut session: Value =
         serde_json::from_str(&std::fs::read_to_string(example(name)).unwrap()).unwrap();
     let chain = RobotModel::from_urdf_file(&example("../../robots/ur10.urdf"), &PackageMap::new())
@@ -144,18 +149,20 @@ fn flange_only(name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
     session.as_object_mut().unwrap().remove("robot");
     session["part"]["mesh"] = json!(example("step_block.stl").to_str().unwrap());
     edit(&mut session);
+    // A folder per variant, not per example: tests that share an example may run at once, and
+    // each removes its own folder when it ends.
+    let tag = session_tag(&session);
     let folder = std::env::temp_dir().join(format!(
-        "cobot-align-flange-{}-{}",
+        "cobot-align-flange-{}-{}-{tag}",
         std::process::id(),
         name.replace('.', "_")
     ));
-    std::fs::create_dir_all(&folder).unwrap();
-    let path = folder.join(format!("{}.json", session_tag(&session)));
-    std::fs::write(&path, session.to_string()).unwrap();
-    path
+    let scratch = Scratch::in_folder(folder, &format!("{tag}.json"));
+    std::fs::write(&scratch, session.to_string()).unwrap();
+    scratch
 }
 
-/// A file name from the edit, so that edited variants of one example do not overwrite each other.
+/// A name from the edit, so that edited variants of one example do not overwrite each other.
 fn session_tag(session: &Value) -> String {
     let text = session.to_string();
     let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {

@@ -3,10 +3,14 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::Value;
+
+use common::Scratch;
 
 fn example(file: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -38,7 +42,7 @@ fn align_text(session: &Path) -> String {
 }
 
 /// A copy of the example session, edited, in its own folder with absolute paths.
-fn scratch_session(name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
+fn scratch_session(name: &str, edit: impl FnOnce(&mut Value)) -> Scratch {
     let mut session: Value =
         serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
     let robot = example("../../robots/ur10.urdf").canonicalize().unwrap();
@@ -50,10 +54,9 @@ fn scratch_session(name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
         "cobot-align-uncertainty-{}-{name}",
         std::process::id()
     ));
-    std::fs::create_dir_all(&folder).unwrap();
-    let path = folder.join("session.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&session).unwrap()).unwrap();
-    path
+    let scratch = Scratch::in_folder(folder, "session.json");
+    std::fs::write(&scratch, serde_json::to_string_pretty(&session).unwrap()).unwrap();
+    scratch
 }
 
 fn number(value: &Value) -> f64 {

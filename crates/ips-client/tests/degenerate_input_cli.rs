@@ -3,10 +3,14 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::{Value, json};
+
+use common::Scratch;
 
 fn example(file: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -14,13 +18,11 @@ fn example(file: &str) -> PathBuf {
         .join(file)
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let folder = std::env::temp_dir().join(format!(
+fn scratch(name: &str) -> Scratch {
+    Scratch::folder(std::env::temp_dir().join(format!(
         "cobot-align-degenerate-{}-{name}",
         std::process::id()
-    ));
-    std::fs::create_dir_all(&folder).unwrap();
-    folder
+    )))
 }
 
 fn ips(args: &[&str]) -> Output {

@@ -3,11 +3,15 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::Command;
 
+use common::Scratch;
+
 /// A copy of an example session in a scratch folder (the plot is written next to it).
-fn scratch_session(name: &str) -> PathBuf {
+fn scratch_session(name: &str) -> Scratch {
     let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/step_block_ur10");
     let mut session: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(example.join(name)).unwrap()).unwrap();
@@ -21,10 +25,9 @@ fn scratch_session(name: &str) -> PathBuf {
         "cobot-align-diagnose-{}-{call}-{name}",
         std::process::id()
     ));
-    std::fs::create_dir_all(&folder).unwrap();
-    let path = folder.join(name);
-    std::fs::write(&path, session.to_string()).unwrap();
-    path
+    let scratch = Scratch::in_folder(folder, name);
+    std::fs::write(&scratch, session.to_string()).unwrap();
+    scratch
 }
 
 fn diagnose(path: &Path) -> serde_json::Value {
@@ -48,7 +51,6 @@ fn noiseless_session_has_no_effect() {
     let result = diagnose(&path);
     assert_eq!(result["verdict"], "no_effect");
     assert!(result["effect"].is_null());
-    let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
 
 #[test]
@@ -81,7 +83,6 @@ fn undeclared_ball_radius_is_found_with_the_design_keys() {
     assert_eq!(result["inspections"].as_array().unwrap().len(), 27);
     let plot = std::fs::read_to_string(result["plot"].as_str().unwrap()).unwrap();
     assert!(plot.starts_with("<svg") && plot.contains("modelling probe_radius"));
-    let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
 
 fn ips(args: &[&std::ffi::OsStr]) -> std::process::Output {
@@ -108,11 +109,10 @@ fn apply(session: &Path, out: &Path) -> serde_json::Value {
     serde_json::from_slice(&output.stdout).unwrap()
 }
 
-fn scratch_folder(name: &str) -> PathBuf {
+fn scratch_folder(name: &str) -> Scratch {
     let folder =
         std::env::temp_dir().join(format!("cobot-align-apply-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&folder).unwrap();
-    folder
+    Scratch::folder(folder)
 }
 
 /// The shipped session touched with a 3.4 mm ball declared as 3 mm, applied from where it lies
@@ -123,7 +123,8 @@ fn scratch_folder(name: &str) -> PathBuf {
 fn apply_writes_the_fitted_radius_into_a_session_that_aligns_to_the_pose_after() {
     let session = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../examples/step_block_ur10/session_probe_radius.json");
-    let out = scratch_folder("radius").join("corrected.json");
+    let folder = scratch_folder("radius");
+    let out = folder.join("corrected.json");
     let applied = apply(&session, &out);
     assert_eq!(applied["effect"], "probe_radius");
     let change = &applied["changes"][0];
@@ -142,7 +143,6 @@ fn apply_writes_the_fitted_radius_into_a_session_that_aligns_to_the_pose_after()
             - before["pose_after"]["xyz"][axis].as_f64().unwrap();
         assert!(moved.abs() < 1e-5, "axis {axis}: {moved} m");
     }
-    let _ = std::fs::remove_dir_all(out.parent().unwrap());
 }
 
 /// A session that declares a wrong joint zero (joint 3 off by 1.5 mrad): the diagnosis finds the
@@ -179,7 +179,6 @@ fn apply_corrects_declared_joint_offsets_and_compliance() {
             "{change}"
         );
         assert_eq!(diagnose(&folder.join("fixed.json"))["verdict"], "no_effect");
-        let _ = std::fs::remove_dir_all(folder);
     }
 }
 
@@ -219,7 +218,6 @@ fn apply_refuses_a_session_with_nothing_to_apply_and_bad_corrections() {
         &|s| s["robot"]["joint_compliance"] = serde_json::json!("stiff"),
         "invalid type: string \"stiff\"",
     );
-    let _ = std::fs::remove_dir_all(folder);
 }
 
 /// The residual plot: titles that fit its width, bars of at least 2 px even for a zero
@@ -237,7 +235,6 @@ fn the_residual_plot_fits_its_titles_shows_every_bar_and_says_what_was_applied()
             .collect()
     };
     let path = scratch_session("session_probe_radius.json");
-    let folder = path.parent().unwrap().to_owned();
     let result = diagnose(&path);
     let plot = std::fs::read_to_string(result["plot"].as_str().unwrap()).unwrap();
     let width: f64 = plot
@@ -285,7 +282,6 @@ fn the_residual_plot_fits_its_titles_shows_every_bar_and_says_what_was_applied()
     assert!(plot.contains("nothing applied"), "{plot}");
     assert!(!plot.contains("modelling"), "{plot}");
     assert!(plot.contains("No effect applied (verdict ambiguous)"));
-    let _ = std::fs::remove_dir_all(folder);
 }
 
 /// `ips diagnose SESSION` also writes the diagnosis as a page: the verdict, the parameters in mm,
@@ -315,5 +311,4 @@ fn the_diagnosis_page_holds_the_verdict_the_plot_the_candidates_and_the_touches(
     // No script, and nothing fetched: the only address is the SVG namespace.
     assert!(!page.contains("<script"));
     assert_eq!(page.matches("http").count(), 1, "{page}");
-    let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }

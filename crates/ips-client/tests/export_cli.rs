@@ -6,6 +6,8 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
+mod common;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -15,6 +17,8 @@ use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::pose::isometry_from_xyz_rpy;
 use nalgebra::Isometry3;
 use serde_json::{Value, json};
+
+use common::Scratch;
 
 fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -46,6 +50,8 @@ fn independent_check(format: ExportFormat, export: &str, report: &Value) {
         std::process::id(),
         fnv(&report.to_string())
     ));
+    // Removed when the check ends, passed or not.
+    let _report_file = Scratch::file(report_path.clone());
     std::fs::write(&report_path, report.to_string()).unwrap();
     let mut child = Command::new("python3")
         .arg(repo("scripts/check-export.py"))
@@ -129,7 +135,8 @@ fn the_example_exports_in_every_format() {
 
 /// The example session with the whole scene turned by `base_from_old_base` (flange poses
 /// instead of joints, so that any tilt is reachable): the part then stands far from upright.
-fn tilted_session(base_from_old_base: &Isometry3<f64>) -> PathBuf {
+/// In a folder of its own, which also takes the plot and page `diagnose` writes next to it.
+fn tilted_session(base_from_old_base: &Isometry3<f64>) -> Scratch {
     let example = repo("examples/step_block_ur10/session_probe_radius.json");
     let mut session: Value =
         serde_json::from_str(&std::fs::read_to_string(&example).unwrap()).unwrap();
@@ -160,13 +167,14 @@ fn tilted_session(base_from_old_base: &Isometry3<f64>) -> PathBuf {
             .to_str()
             .unwrap()
     );
-    let path = std::env::temp_dir().join(format!(
-        "cobot-align-export-tilted-{}-{:x}.json",
+    let folder = std::env::temp_dir().join(format!(
+        "cobot-align-export-tilted-{}-{:x}",
         std::process::id(),
         fnv(&session.to_string())
     ));
-    std::fs::write(&path, session.to_string()).unwrap();
-    path
+    let scratch = Scratch::in_folder(folder, "session.json");
+    std::fs::write(&scratch, session.to_string()).unwrap();
+    scratch
 }
 
 #[test]

@@ -4,6 +4,8 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
+mod common;
+
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -11,14 +13,17 @@ use std::time::Duration;
 
 use serde_json::{Value, json};
 
+use common::Scratch;
+
 fn example(file: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../examples/step_block_ur10")
         .join(file)
 }
 
-/// The example session with absolute paths, in a fresh folder; returns it and the journal.
-fn session(name: &str) -> (PathBuf, PathBuf) {
+/// The example session with absolute paths, in a fresh folder; returns the folder (removed when
+/// dropped), the session and the journal.
+fn session(name: &str) -> (Scratch, PathBuf, PathBuf) {
     let mut template: Value =
         serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
     template["robot"]["urdf"] = json!(example("../../robots/ur10.urdf").to_str().unwrap());
@@ -26,10 +31,11 @@ fn session(name: &str) -> (PathBuf, PathBuf) {
     let folder =
         std::env::temp_dir().join(format!("cobot-align-http-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&folder);
-    std::fs::create_dir_all(&folder).unwrap();
+    let folder = Scratch::folder(folder);
     let session = folder.join("session.json");
     std::fs::write(&session, template.to_string()).unwrap();
-    (session, folder.join("inspections.journal"))
+    let journal = folder.join("inspections.journal");
+    (folder, session, journal)
 }
 
 fn http_get(host_port: &str, path: &str) -> (u16, String) {
@@ -48,7 +54,7 @@ fn http_get(host_port: &str, path: &str) -> (u16, String) {
 
 #[test]
 fn ready_names_the_page_and_the_page_shows_the_services_inspections() {
-    let (session, journal) = session("ready");
+    let (_folder, session, journal) = session("ready");
     let args: Vec<String> = [
         "serve",
         "--session",
@@ -93,7 +99,7 @@ fn ready_names_the_page_and_the_page_shows_the_services_inspections() {
 
 #[test]
 fn an_address_that_cannot_be_bound_is_bad_input() {
-    let (session, journal) = session("bad-address");
+    let (_folder, session, journal) = session("bad-address");
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_ips"))
         .args(["serve", "--session"])
         .arg(&session)

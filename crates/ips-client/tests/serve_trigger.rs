@@ -6,6 +6,8 @@
 
 #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -14,6 +16,8 @@ use align_core::pose::isometry_from_xyz_rpy;
 use align_core::robots::ShippedRobot;
 use nalgebra::{Isometry3, Point3, Translation3};
 use serde_json::{Value, json};
+
+use common::Scratch;
 
 /// Approach speeds along the probe axis, used in turn (sim-robot allows up to 5 mm/s).
 const SPEEDS_M_S: [f64; 3] = [0.005, 0.002, 0.0035];
@@ -70,7 +74,7 @@ struct Seen {
 }
 
 /// The example session without inspections, paths absolute, in a fresh folder.
-fn template_folder(name: &str) -> PathBuf {
+fn template_folder(name: &str) -> Scratch {
     let mut template: Value =
         serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
     template["inspections"] = json!([]);
@@ -78,7 +82,7 @@ fn template_folder(name: &str) -> PathBuf {
     template["part"]["mesh"] = json!(example("step_block.stl").to_str().unwrap());
     let folder = std::env::temp_dir().join(format!("cobot-align-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&folder);
-    std::fs::create_dir_all(&folder).unwrap();
+    let folder = Scratch::folder(folder);
     std::fs::write(folder.join("template.json"), template.to_string()).unwrap();
     folder
 }
@@ -298,7 +302,6 @@ fn a_trigger_probe_captures_every_touch_at_its_edge_without_a_get() {
     );
     bridge.stop();
     sim.stop();
-    let _ = std::fs::remove_dir_all(&folder);
 }
 
 #[test]

@@ -12,12 +12,45 @@ fn inspection(id: u64) -> Inspection {
     }
 }
 
-fn scratch(name: &str) -> PathBuf {
+/// A journal's path in a scratch folder that is removed when this is dropped, also when an
+/// assertion fails and the test unwinds, so that runs leave nothing in the temp folder. It
+/// derefs to the journal's path.
+struct Scratch {
+    folder: PathBuf,
+    path: PathBuf,
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        // Best effort: a leftover folder is no reason to fail a test.
+        let _ = std::fs::remove_dir_all(&self.folder);
+    }
+}
+
+fn scratch(name: &str) -> Scratch {
     let folder =
         std::env::temp_dir().join(format!("cobot-align-journal-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&folder);
-    std::fs::create_dir_all(&folder).unwrap();
-    folder.join("inspections.journal")
+    let scratch = Scratch {
+        path: folder.join("inspections.journal"),
+        folder,
+    };
+    std::fs::create_dir_all(&scratch.folder).unwrap();
+    scratch
 }
 
 /// A journal of `count` added inspections, and the byte offset where each line ends.

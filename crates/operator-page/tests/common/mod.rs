@@ -25,10 +25,24 @@ pub struct SimCell {
     /// The example session's planned touches (joints, rad): holding the simulator at each
     /// gives a touch of the hidden part.
     pub planned: Vec<Vec<f64>>,
+    /// The session's folder. Last, so that it is removed after the service (which journals
+    /// into it) has stopped.
+    _folder: Scratch,
+}
+
+/// A scratch folder that is removed when this is dropped, also when an assertion fails and the
+/// test unwinds, so that runs leave nothing in the temp folder.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        // Best effort: a leftover folder is no reason to fail a test.
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The example session without its inspections, paths made absolute, in a fresh folder.
-fn template(name: &str) -> (PathBuf, Vec<Vec<f64>>) {
+fn template(name: &str) -> (Scratch, PathBuf, Vec<Vec<f64>>) {
     let mut template: Value =
         serde_json::from_str(&std::fs::read_to_string(example("session.json")).unwrap()).unwrap();
     let planned = template["inspections"]
@@ -43,10 +57,11 @@ fn template(name: &str) -> (PathBuf, Vec<Vec<f64>>) {
     let folder =
         std::env::temp_dir().join(format!("cobot-align-page-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&folder);
+    let scratch = Scratch(folder.clone());
     std::fs::create_dir_all(&folder).unwrap();
     let session = folder.join("template.json");
     std::fs::write(&session, template.to_string()).unwrap();
-    (session, planned)
+    (scratch, session, planned)
 }
 
 impl SimCell {
@@ -70,7 +85,7 @@ impl SimCell {
             publish: "tcp://127.0.0.1:*".to_owned(),
         })
         .unwrap();
-        let (session, planned) = template(name);
+        let (folder, session, planned) = template(name);
         let service = align_service::server::start(&align_service::server::Config {
             session: session.clone(),
             journal: session.with_file_name("inspections.journal"),
@@ -90,6 +105,7 @@ impl SimCell {
             service,
             session,
             planned,
+            _folder: folder,
         }
     }
 
