@@ -183,46 +183,6 @@ impl FacingTree {
         self.closest_within_slack(query, facing, max_distance_m, hint, 1.0)
     }
 
-    /// Whether some triangle lies within `max_distance_m` of `query` (inclusive). Stops at the
-    /// first one found: the check that enough of a scan lies near a part asks it for every
-    /// keypoint near the part's box, and needs no closest point.
-    pub fn any_within(&self, query: &Point3<f64>, max_distance_m: f64) -> bool {
-        if self.nodes.is_empty() || max_distance_m.is_nan() || max_distance_m < 0.0 {
-            return false;
-        }
-        let q = query.coords;
-        let limit_squared = max_distance_m * max_distance_m;
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        stack.push(0);
-        while let Some(index) = stack.pop() {
-            let node = &self.nodes[index as usize];
-            if node.count > 0 {
-                let slots = node.first as usize..(node.first + node.count) as usize;
-                if slots.into_iter().any(|slot| {
-                    let [a, b, c] = &self.corners[slot];
-                    (closest_on_triangle(&q, a, b, c).0 - q).norm_squared() <= limit_squared
-                }) {
-                    return true;
-                }
-                continue;
-            }
-            let (left, right) = (node.first, node.first + 1);
-            let left_bound = box_distance_squared(&self.nodes[left as usize], &q);
-            let right_bound = box_distance_squared(&self.nodes[right as usize], &q);
-            // The nearer child is popped first: a hit there ends the search.
-            let mut children = [(left_bound, left), (right_bound, right)];
-            if left_bound <= right_bound {
-                children.swap(0, 1);
-            }
-            for (bound, child) in children {
-                if bound <= limit_squared {
-                    stack.push(child);
-                }
-            }
-        }
-        false
-    }
-
     /// [`FacingTree::closest`], approximate by at most a factor `slack` (>= 1): the triangle
     /// found is no farther than `slack` times the closest one. A search that only needs to know
     /// which way the surface lies (the global search's exploration, whose queries are mostly
@@ -529,40 +489,6 @@ mod tests {
                 })
             })
             .collect()
-    }
-
-    #[test]
-    fn any_within_answers_as_the_closest_distance_does() {
-        let mut rng = SplitMix64::new(11);
-        let corners = random_triangles(400, &mut rng);
-        let normals: Vec<Vector3<f64>> = corners
-            .iter()
-            .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
-            .collect();
-        let tree = FacingTree::new(&corners, &normals, 2.0);
-        let (mut near, mut far) = (0, 0);
-        for _ in 0..2000 {
-            let query = Point3::new(
-                between(&mut rng, -1.5, 1.5),
-                between(&mut rng, -1.5, 1.5),
-                between(&mut rng, -0.8, 0.8),
-            );
-            let closest = corners
-                .iter()
-                .map(|[a, b, c]| {
-                    (closest_on_triangle(&query.coords, a, b, c).0 - query.coords).norm()
-                })
-                .fold(f64::INFINITY, f64::min);
-            for max_distance_m in [0.01, 0.05, 0.2, 0.6] {
-                let expected = closest <= max_distance_m;
-                assert_eq!(tree.any_within(&query, max_distance_m), expected);
-                if expected { near += 1 } else { far += 1 }
-            }
-        }
-        // Both answers are exercised often.
-        assert!(near > 1000 && far > 1000, "{near} near, {far} far");
-        assert!(!tree.any_within(&Point3::origin(), f64::NAN));
-        assert!(!FacingTree::new(&[], &[], 1.0).any_within(&Point3::origin(), 1.0));
     }
 
     #[test]
