@@ -31,7 +31,8 @@ const PACKED_BITS: u32 = 21;
 const PACKED_OFFSET: i64 = 1 << (PACKED_BITS - 1);
 
 /// `key` packed into one `u64` in the same order, or `None` when an index does not fit (a cloud
-/// kilometres wide at a millimetre voxel, or a non-finite point).
+/// kilometres wide at a millimetre voxel, or an infinite coordinate; a NaN one bins at 0 on
+/// both paths).
 fn packed((x, y, z): VoxelKey) -> Option<u64> {
     let axis = |index: i64| {
         let shifted = index.checked_add(PACKED_OFFSET)?;
