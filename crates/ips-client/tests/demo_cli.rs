@@ -4,6 +4,8 @@
 
 use std::process::Command;
 
+mod common;
+
 /// The demo starts the sibling binaries; `cargo test -p ips-client` alone does not build them.
 fn ensure_services_built() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -12,9 +14,15 @@ fn ensure_services_built() {
 
 /// Runs `ips demo ARGS` (which must include --json), which must succeed, and returns its document.
 fn run_demo(args: &[&str]) -> serde_json::Value {
+    run_demo_with_temp(args, &std::env::temp_dir())
+}
+
+/// [`run_demo`] with `temp` as the demo's temp folder (TMPDIR).
+fn run_demo_with_temp(args: &[&str], temp: &std::path::Path) -> serde_json::Value {
     ensure_services_built();
     let output = Command::new(env!("CARGO_BIN_EXE_ips"))
         .args(args)
+        .env("TMPDIR", temp)
         .output()
         .unwrap();
     assert!(
@@ -27,7 +35,17 @@ fn run_demo(args: &[&str]) -> serde_json::Value {
 
 #[test]
 fn demo_recovers_the_hidden_pose_to_a_tenth_of_a_millimetre() {
-    let result = run_demo(&["demo", "--json"]);
+    // Its own temp folder: the demo's scratch folder (session, journal, capture) must be gone
+    // when it ends.
+    let temp = common::Scratch::folder(
+        std::env::temp_dir().join(format!("cobot-align-demo-test-{}", std::process::id())),
+    );
+    let result = run_demo_with_temp(&["demo", "--json"], &temp);
+    let left: Vec<_> = std::fs::read_dir(&*temp)
+        .unwrap()
+        .map(|entry| entry.unwrap().file_name())
+        .collect();
+    assert!(left.is_empty(), "the demo left {left:?}");
     let error_m = result["pose_error_m"].as_f64().unwrap();
     let error_rad = result["pose_error_rad"].as_f64().unwrap();
     assert!(error_m < 1e-4, "{error_m} m");

@@ -142,8 +142,10 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
     }
     let ips_program =
         std::env::current_exe().map_err(|error| CliError::Failure(error.to_string()))?;
-    let folder = std::env::temp_dir().join(format!("cobot-align-demo-{}", std::process::id()));
-    std::fs::create_dir_all(&folder).map_err(|error| CliError::Failure(error.to_string()))?;
+    let scratch = Scratch::create(
+        std::env::temp_dir().join(format!("cobot-align-demo-{}", std::process::id())),
+    )?;
+    let folder = scratch.0.clone();
     let scene = Scene::new(robot, args.effect, args.noise, &folder)?;
     let session_path = folder.join("session.json");
     let session_text = serde_json::to_string_pretty(&scene.session).map_err(BadInput::new)?;
@@ -186,7 +188,7 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
     } else {
         None
     };
-    let _ = std::fs::remove_dir_all(&folder);
+    drop(scratch);
     let aligned = captured
         .aligned
         .map_err(|reason| CliError::Failure(format!("align failed: {reason}")))?;
@@ -232,6 +234,27 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
             .as_ref()
             .map(|(pose, _)| error(pose).1),
     })
+}
+
+/// The demo's folder (the session, the journal, the saved capture), removed when the demo
+/// ends, however it ends: a child that died early or an align that failed returned through `?`
+/// and left a `cobot-align-demo-<pid>` folder behind per run. The inspections in it are the
+/// simulator's, made again by the next run.
+struct Scratch(std::path::PathBuf);
+
+impl Scratch {
+    fn create(folder: std::path::PathBuf) -> Result<Self, CliError> {
+        std::fs::create_dir_all(&folder).map_err(|error| {
+            CliError::Failure(format!("cannot create {}: {error}", folder.display()))
+        })?;
+        Ok(Self(folder))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The saved session aligned again with its robot's nominal kinematics (the controller's
