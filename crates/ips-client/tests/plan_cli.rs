@@ -15,6 +15,8 @@ use align_core::pose::isometry_from_xyz_rpy;
 use nalgebra::{Point3, Vector3};
 use serde_json::{Value, json};
 
+mod common;
+
 fn example(file: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../examples/step_block_ur10")
@@ -100,7 +102,9 @@ fn planned_joints_touch_where_planned_and_let_the_alignment_recover_the_nominal_
         .iter()
         .map(|t| json!({"id": t["id"], "q": t["q_contact"]}))
         .collect();
-    let path = std::env::temp_dir().join(format!("cobot-align-plan-{}.json", std::process::id()));
+    let path = common::Scratch::file(
+        std::env::temp_dir().join(format!("cobot-align-plan-{}.json", std::process::id())),
+    );
     std::fs::write(&path, touched.to_string()).unwrap();
     let output = ips(&["align", path.to_str().unwrap(), "--json"]);
     assert!(
@@ -115,7 +119,6 @@ fn planned_joints_touch_where_planned_and_let_the_alignment_recover_the_nominal_
         assert!((got - want).abs() < 1e-6, "xyz[{axis}] {got} vs {want}");
     }
     assert_eq!(aligned["ambiguous"], false);
-    let _ = std::fs::remove_file(path);
 }
 
 #[test]
