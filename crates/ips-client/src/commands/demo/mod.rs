@@ -145,8 +145,8 @@ pub fn demo(args: &DemoArgs, mut progress: impl FnMut(&str)) -> Result<DemoOutpu
     let scratch = Scratch::create(
         std::env::temp_dir().join(format!("cobot-align-demo-{}", std::process::id())),
     )?;
-    let folder = scratch.0.clone();
-    let scene = Scene::new(robot, args.effect, args.noise, &folder)?;
+    let folder = scratch.0.as_path();
+    let scene = Scene::new(robot, args.effect, args.noise, folder)?;
     let session_path = folder.join("session.json");
     let session_text = serde_json::to_string_pretty(&scene.session).map_err(BadInput::new)?;
     std::fs::write(&session_path, session_text)
