@@ -7,6 +7,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use super::matching::{Lookup, Match, NO_HINT, correspond};
+use super::schedule::FIXED_POINT_FRACTION;
 use super::{PcaOptions, step_for};
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
@@ -96,7 +97,13 @@ pub(super) fn polish(
         };
         let previous = polished;
         polished = step * polished;
-        still = if pose_distance(&previous, &polished, radius_m) <= options.tolerance_m {
+        let moved_m = pose_distance(&previous, &polished, radius_m);
+        // A fixed point: the next steps would be the same (see `FIXED_POINT_FRACTION`).
+        if moved_m <= FIXED_POINT_FRACTION * options.tolerance_m {
+            still = STILL_STEPS;
+            break;
+        }
+        still = if moved_m <= options.tolerance_m {
             still + 1
         } else {
             0
