@@ -59,7 +59,8 @@ pub struct PcaOptions {
     /// the fit by a fraction of the voxel size).
     pub voxel_centroids: bool,
     /// A run stops once its pose lies within `tolerance_m` of each of the last `window` poses
-    /// (thesis 2.1.4, whose window is 19) and its band has ended.
+    /// (thesis 2.1.4, whose window is 19) and its band has ended, or at once when a step in its
+    /// last band moves the pose by under a tenth of `tolerance_m` (a fixed point).
     pub window: usize,
     pub tolerance_m: f64,
     /// Parallel correspondence search (rayon); off gives the single-thread timing.

@@ -98,7 +98,8 @@ pub(super) fn polish(
         let previous = polished;
         polished = step * polished;
         let moved_m = pose_distance(&previous, &polished, radius_m);
-        // A fixed point: the next steps would be the same (see `FIXED_POINT_FRACTION`).
+        // A fixed point (see `FIXED_POINT_FRACTION`). The band may still shrink with the
+        // spread, but [`STILL_STEPS`] steps this still would end the polish anyway.
         if moved_m <= FIXED_POINT_FRACTION * options.tolerance_m {
             still = STILL_STEPS;
             break;
