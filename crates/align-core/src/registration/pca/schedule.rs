@@ -66,9 +66,10 @@ const LAST_BAND_PROGRESS_FRACTION: f64 = 0.1;
 /// voxels wide: with the 5 mm keypoints, a 25 mm band on the 10 mm level and a 50 mm band on the
 /// 20 mm one (the peers' coarse-to-fine stages use a voxel of a third of their band, 8 and
 /// 17 mm there). With three voxels (25 mm on the 5 mm keypoints, 50 mm on the 10 mm ones) a
-/// 50-100 mm local run spent half its steps' queries in those two bands; with this, on both CAD
-/// corpora, the same successes but one more (at 50 mm), and a median time per scan of 0.76-0.88
-/// of the one before at 50-100 mm (`replay` bench, docs/cad-scan-trials.md). The 3 cm run that
+/// 50 mm local run spent three fifths of its time in those two bands (a trace, not kept); with
+/// this and the last band's shorter look ([`LAST_BAND_STEPS`]), on both CAD corpora the same
+/// successes but one more (at 50 mm), and a per-scene median time ratio of 0.73-0.97 at
+/// 50-100 mm (`replay` bench, docs/cad-scan-trials.md). The 3 cm run that
 /// ends a full alignment after its exploration is given the fine keypoints only (see
 /// `locate`).
 const BAND_PER_LEVEL_VOXEL: f64 = 2.4;
