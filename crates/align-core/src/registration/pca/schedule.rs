@@ -45,9 +45,9 @@ const STEPS_PER_BAND: usize = 15;
 /// steps (the run and the polish), and ended 73 mm off when every run was cut after 30
 /// (docs/cad-scan-trials.md). The polish after the run settles the pose in its own band.
 /// The steps are counted from the last band's settling (a step under [`SETTLED_FRACTION`] of
-/// it, or [`STEPS_PER_BAND`] steps). With 30 a miss spent 45-255 steps in the last band; with
-/// 10, every scan of both CAD corpora succeeded or failed as before, locally and in full
-/// (`replay` bench, docs/cad-scan-trials.md). Counting from the band's first step, or 15 from
+/// it, or [`STEPS_PER_BAND`] steps). With 30 a miss spent 32-255 steps in the last band; with
+/// 10, both CAD corpora kept their successes, locally and in full (`replay` bench,
+/// docs/cad-scan-trials.md). Counting from the band's first step, or 15 from
 /// its settling, lost a full alignment (the IRB 1600's link 5 at 50 mm, which slides into place
 /// over the band's first 30 steps).
 const LAST_BAND_STEPS: usize = 10;
