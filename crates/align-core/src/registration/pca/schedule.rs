@@ -47,9 +47,8 @@ const STEPS_PER_BAND: usize = 15;
 /// The steps are counted from the last band's settling (a step under [`SETTLED_FRACTION`] of
 /// it, or [`STEPS_PER_BAND`] steps). With 30 a miss spent 32-255 steps in the last band; with
 /// 10, both CAD corpora kept their successes, locally and in full (`replay` bench,
-/// docs/cad-scan-trials.md). Counting from the band's first step, or 15 from
-/// its settling, lost a full alignment (the IRB 1600's link 5 at 50 mm, which slides into place
-/// over the band's first 30 steps).
+/// docs/cad-scan-trials.md). Counting 10 from the band's first step, or 15 from its settling,
+/// lost a full alignment: the IRB 1600's link 5 at 50 mm ended 5 mm off instead of 0.5 mm.
 const LAST_BAND_STEPS: usize = 10;
 
 /// A step in the last band that moves the pose by less than this fraction of the tolerance
@@ -69,9 +68,8 @@ const LAST_BAND_PROGRESS_FRACTION: f64 = 0.1;
 /// 50 mm local run spent three fifths of its time in those two bands (a trace, not kept); with
 /// this and the last band's shorter look ([`LAST_BAND_STEPS`]), on both CAD corpora the same
 /// successes but one more (at 50 mm), and a per-scene median time ratio of 0.73-0.97 at
-/// 50-100 mm (`replay` bench, docs/cad-scan-trials.md). The 3 cm run that
-/// ends a full alignment after its exploration is given the fine keypoints only (see
-/// `locate`).
+/// 50-100 mm (`replay` bench, docs/cad-scan-trials.md). The 3 cm run that ends a full
+/// alignment after its exploration is given the fine keypoints only (see `locate`).
 const BAND_PER_LEVEL_VOXEL: f64 = 2.4;
 
 /// The coarser keypoint levels of a halving run, as multiples of the options' voxel.
