@@ -20,6 +20,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3
 
 mod exploration;
 mod matching;
+mod model_to_scan;
 mod planes;
 mod polish;
 mod schedule;
@@ -32,7 +33,10 @@ use self::matching::{Lookup, Match, correspond, near_surface};
 use self::planes::without_large_planes;
 use self::polish::polish;
 pub use self::schedule::DeltaSchedule;
-use self::schedule::{RunSlack, ScheduleRun, coarser_levels, run_schedule, run_schedule_on_levels};
+use self::schedule::{
+    RunSlack, ScheduleRun, coarser_levels, model_to_scan_levels, run_schedule,
+    run_schedule_on_levels,
+};
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
 use crate::geometry::{Mesh, PrincipalSpread};
@@ -106,6 +110,13 @@ pub struct PcaOptions {
     /// the floor and the fixtures than of the part, and they decide where the wide bands' steps
     /// go (see `local_first_band`). Off: the first band is delta0, the thesis's loop.
     pub local_band_within_radius: bool,
+    /// Without an exploration (`starts` 0), the run's bands wider than 10 cm match the other
+    /// way: points sampled on the part's surface each find the nearest scan keypoint in the band,
+    /// as Open3D's and small_gicp's ICP do (default; see `MODEL_TO_SCAN_ABOVE_M`). Each of the
+    /// part's points then counts once however much of the floor lies in the band, and the
+    /// floor meets the faces a lying part rests on. Off: the scan's keypoints find the surface
+    /// in every band, as the rest of the run does.
+    pub model_to_scan_wide_bands: bool,
 }
 
 impl Default for PcaOptions {
@@ -139,6 +150,7 @@ impl Default for PcaOptions {
             fine_run: true,
             wide_band_slack: true,
             local_band_within_radius: true,
+            model_to_scan_wide_bands: true,
         }
     }
 }
@@ -459,7 +471,20 @@ fn locate(
         } else {
             RunSlack::EXACT
         };
-        run_schedule_on_levels(mesh, &levels, &start, schedule_from, options, slack)
+        let model_to_scan = if coarse.is_none() && options.model_to_scan_wide_bands {
+            model_to_scan_levels(mesh, &levels, schedule_from)
+        } else {
+            Vec::new()
+        };
+        run_schedule_on_levels(
+            mesh,
+            &levels,
+            &start,
+            schedule_from,
+            options,
+            slack,
+            &model_to_scan,
+        )
     };
     let mut uniqueness_found = None;
     if let Some(coarse) = coarse.as_ref().filter(|_| options.twin_search) {
@@ -503,6 +528,7 @@ fn locate(
                 schedule_from,
                 options,
                 RunSlack::EXACT,
+                &[],
             );
             if coarse.score(mesh, &again.pose) > found_score {
                 run = again;

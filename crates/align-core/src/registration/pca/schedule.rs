@@ -6,6 +6,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::matching::{Lookup, NO_HINT, correspond};
+use super::model_to_scan::{ModelSamples, ModelToScanLevel, ScanTree, correspond_model_to_scan};
 use super::{PcaOptions, step_for};
 use crate::geometry::Mesh;
 use crate::registration::convergence::{StopCriterion, pose_distance};
@@ -224,6 +225,7 @@ pub(super) fn run_schedule(
         delta0_m,
         options,
         RunSlack::always(slack),
+        &[],
     )
 }
 
@@ -246,11 +248,46 @@ pub(super) fn coarser_levels(
         .collect()
 }
 
+/// Bands wider than this match model to scan when the run is given the levels' samples and
+/// trees (see [`PcaOptions::model_to_scan_wide_bands`]). Measured on the two CAD corpora
+/// (`replay` bench, docs/cad-scan-trials.md): with 10 cm the local successes went 76 -> 75 and
+/// 80 -> 83, ahead of or level with the better peer at every delta on both; with 5 cm 74 and 77,
+/// with 2.4 cm (every band on a coarser level) 67 and 76, with 15 and 20 cm 74/83 and 74/81.
+/// Matching both ways in those bands gave 76 and 84 but lost a 500 mm scan a peer found.
+pub(super) const MODEL_TO_SCAN_ABOVE_M: f64 = 0.1;
+
+/// The model samples and scan tree of each of `levels` (voxel, keypoints) whose bands, in a
+/// halving run from `delta0_m`, reach beyond [`MODEL_TO_SCAN_ABOVE_M`]; `None` for the others,
+/// the finest level always among them (the bands that set the precision match scan to model).
+pub(super) fn model_to_scan_levels(
+    mesh: &Mesh,
+    levels: &[(f64, &[Point3<f64>])],
+    delta0_m: f64,
+) -> Vec<Option<ModelToScanLevel>> {
+    levels
+        .iter()
+        .enumerate()
+        .map(|(index, (voxel_m, keypoints))| {
+            // A level takes the bands from BAND_PER_LEVEL_VOXEL of its voxels up to where the
+            // next coarser one takes over.
+            let widest_band_m = levels
+                .get(index + 1)
+                .map_or(delta0_m, |(coarser_m, _)| coarser_m * BAND_PER_LEVEL_VOXEL);
+            (index > 0 && widest_band_m > MODEL_TO_SCAN_ABOVE_M).then(|| ModelToScanLevel {
+                samples: ModelSamples::new(mesh, *voxel_m),
+                tree: ScanTree::new(keypoints),
+            })
+        })
+        .collect()
+}
+
 /// One run of the thesis's loop on keypoint levels (voxel, keypoints), finest first (voxel 0,
 /// so that every band may use it): each step runs on the coarsest level whose voxel the step's
 /// band exceeds [`BAND_PER_LEVEL_VOXEL`] times. A band of decimetres holds the part's whole
 /// neighbourhood, and at the fine voxel a 500 mm local run spent seconds matching it exactly;
-/// the narrow bands at the end, which set the precision, run on the finest.
+/// the narrow bands at the end, which set the precision, run on the finest. A level with an
+/// entry in `model_to_scan` (empty: none) matches model to scan in its bands wider than
+/// [`MODEL_TO_SCAN_ABOVE_M`].
 pub(super) fn run_schedule_on_levels(
     mesh: &Mesh,
     levels: &[(f64, &[Point3<f64>])],
@@ -258,6 +295,7 @@ pub(super) fn run_schedule_on_levels(
     delta0_m: f64,
     options: &PcaOptions,
     slack: RunSlack,
+    model_to_scan: &[Option<ModelToScanLevel>],
 ) -> ScheduleRun {
     let (lower, upper) = mesh.bounds();
     let mut hints: Vec<Vec<u32>> = levels
@@ -293,15 +331,24 @@ pub(super) fn run_schedule_on_levels(
             exact_within_band_fraction: slack.exact_within_band_fraction,
             ..Lookup::exact(options.parallel)
         };
-        let matches = correspond(
-            mesh,
-            &reachable.points,
-            &pose,
-            delta,
-            (&lower, &upper),
-            lookup,
-            &mut reachable.hints,
-        );
+        let matches = match model_to_scan
+            .get(level)
+            .and_then(Option::as_ref)
+            .filter(|_| delta > MODEL_TO_SCAN_ABOVE_M)
+        {
+            Some(model_to_scan) => {
+                correspond_model_to_scan(model_to_scan, &pose, delta, options.parallel)
+            }
+            None => correspond(
+                mesh,
+                &reachable.points,
+                &pose,
+                delta,
+                (&lower, &upper),
+                lookup,
+                &mut reachable.hints,
+            ),
+        };
         if matches.len() < 6 {
             break;
         }
