@@ -249,8 +249,8 @@ pub(super) fn coarser_levels(
 }
 
 /// Bands wider than this match model to scan when the run is given the levels' samples and
-/// trees (see [`PcaOptions::model_to_scan_wide_bands`]). Measured on the two CAD corpora
-/// (`replay` bench, docs/cad-scan-trials.md): with 10 cm the local successes went 76 -> 75 and
+/// trees (see [`PcaOptions::model_to_scan_wide_bands`], off by default). Measured on the two CAD
+/// corpora (`replay` bench with the option on, docs/cad-scan-trials.md): with 10 cm the local successes went 76 -> 75 and
 /// 80 -> 83, ahead of or level with the better peer at every delta on both; with 5 cm 74 and 77,
 /// with 2.4 cm (every band on a coarser level) 67 and 76, with 15 and 20 cm 74/83 and 74/81.
 /// Matching both ways in those bands gave 76 and 84 but lost a 500 mm scan a peer found.
