@@ -325,6 +325,7 @@ pub(super) fn run_schedule_on_levels(
             .rposition(|(voxel_m, _)| voxel_m * BAND_PER_LEVEL_VOXEL < delta)
             .unwrap_or(0);
         let reachable = &mut reachable[level];
+        reachable.narrow_to(delta);
         reachable.update(levels[level].1, &pose, &mut hints[level]);
         let lookup = Lookup {
             slack: slack.at_band(delta),
@@ -398,14 +399,19 @@ pub(super) fn run_schedule_on_levels(
     }
 }
 
+/// A run's kept keypoints are filtered again when its band's reach falls below this fraction of
+/// the reach they were filtered for (see [`Reachable::narrow_to`]).
+const NARROWED_REACH_FRACTION: f64 = 0.8;
+
 /// The keypoints a run can match, kept between its steps: a keypoint inside the part's box grown
-/// by the run's first band lies within `reach_m` of the box's centre, so one more than
+/// by the run's band lies within `reach_m` of the box's centre, so one more than
 /// `reach_m + margin_m` from where the centre was at the last filtering cannot match until the
 /// centre has moved by more than `margin_m`. Exact: the matches, and their order, are those of
 /// all the keypoints; a scan of a cell holds ten times more keypoints than the part's
 /// neighbourhood, and each step tested every one against the box.
 struct Reachable {
     box_centre: Point3<f64>,
+    half_extent: Vector3<f64>,
     reach_m: f64,
     margin_m: f64,
     filtered_at: Option<Point3<f64>>,
@@ -422,12 +428,26 @@ impl Reachable {
         let reach_m = (half + Vector3::repeat(delta0_m)).norm();
         Self {
             box_centre: Point3::from((lower.coords + upper.coords) / 2.0),
+            half_extent: half,
             reach_m,
             margin_m: 0.25 * reach_m,
             filtered_at: None,
             indices: Vec::new(),
             points: Vec::new(),
             hints: Vec::new(),
+        }
+    }
+
+    /// The run's band has narrowed to `band_m`: once the reach it gives is well below the one
+    /// kept, the keypoints are filtered again with it. In the narrow bands at the end of a run
+    /// from a wide start, the keypoints kept for the first band were several times those a step
+    /// could match, and each step tested every one against the box (docs/cad-scan-trials.md).
+    fn narrow_to(&mut self, band_m: f64) {
+        let reach_m = (self.half_extent + Vector3::repeat(band_m)).norm();
+        if reach_m < NARROWED_REACH_FRACTION * self.reach_m {
+            self.reach_m = reach_m;
+            self.margin_m = 0.25 * reach_m;
+            self.filtered_at = None;
         }
     }
 
@@ -574,6 +594,41 @@ mod tests {
         let run = run_schedule(&mesh, &points, &Isometry3::identity(), 0.02, &options, 1.0);
         assert!(run.converged);
         assert_eq!(run.iterations, 2);
+    }
+
+    #[test]
+    fn narrowed_keypoints_keep_every_one_a_narrow_band_can_match() {
+        let (mesh, _) = box_scan();
+        let (lower, upper) = mesh.bounds();
+        let mut rng = crate::rng::SplitMix64::new(3);
+        let keypoints: Vec<Point3<f64>> = (0..5000)
+            .map(|_| Point3::from(rng.unit_vector() * (0.8 * rng.uniform())))
+            .collect();
+        let pose = Isometry3::new(Vector3::new(0.02, -0.01, 0.0), Vector3::new(0.0, 0.0, 0.3));
+        let mut reachable = Reachable::new(&lower, &upper, 0.5);
+        let mut hints = vec![NO_HINT; keypoints.len()];
+        reachable.update(&keypoints, &pose, &mut hints);
+        let kept_wide = reachable.points.len();
+        for band_m in [0.5, 0.2, 0.05, 0.01] {
+            reachable.narrow_to(band_m);
+            reachable.update(&keypoints, &pose, &mut hints);
+            // Every keypoint inside the part's box grown by the band is still there.
+            let in_band_box = keypoints.iter().filter(|p| {
+                let in_part = pose.inverse() * *p;
+                (0..3).all(|axis| {
+                    in_part[axis] >= lower[axis] - band_m && in_part[axis] <= upper[axis] + band_m
+                })
+            });
+            for point in in_band_box {
+                assert!(reachable.points.contains(point), "band {band_m}");
+            }
+        }
+        // And the 1 cm band keeps far fewer than the first band did.
+        assert!(
+            2 * reachable.points.len() < kept_wide,
+            "{} of {kept_wide}",
+            reachable.points.len()
+        );
     }
 
     #[test]
