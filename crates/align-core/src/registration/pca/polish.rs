@@ -60,6 +60,13 @@ pub(super) fn polish(
         })
         .copied()
         .collect();
+    let stride = super::schedule::thinning_for(near.len() as f64);
+    let near: Vec<Point3<f64>> = near
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| super::schedule::kept_at_stride(*i, stride))
+        .map(|(_, p)| p)
+        .collect();
     let exact = Lookup::exact(options.parallel);
     let (least, most) = BAND_FRACTION_RANGE;
     let radius_m = mesh.radius_m();
