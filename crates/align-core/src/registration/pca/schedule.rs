@@ -393,7 +393,7 @@ pub(super) fn run_schedule_on_levels(
         // steps ago, so the correspondences are those of then and the run would go round until
         // the last band's progress check (a few keypoints at the band's edge, or between a face
         // and an edge, going in and out in turn). It has settled as far as the cycle's steps are
-        // short; on the CAD scans such runs went round for 30-200 steps.
+        // short; traced runs on the CAD scans went round for 10-30 steps (docs/cad-scan-trials.md).
         if last_band
             && let Some(period) = cycle_period(
                 &recent_last_band,
