@@ -11,6 +11,7 @@ use super::{PcaOptions, step_for};
 use crate::geometry::Mesh;
 use crate::registration::convergence::{StopCriterion, pose_distance};
 use crate::registration::sampling::voxel_representatives;
+use crate::rng::SplitMix64;
 
 /// How delta shrinks over a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -477,12 +478,10 @@ pub(super) fn kept_at_stride(index: usize, stride: usize) -> bool {
     if stride <= 1 {
         return true;
     }
-    // SplitMix64's finaliser.
-    let mut x = (index as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^= x >> 31;
-    x.is_multiple_of(stride as u64)
+    // SplitMix64's first draw from the index: the same bits as a hash of it.
+    SplitMix64::new(index as u64)
+        .next_u64()
+        .is_multiple_of(stride as u64)
 }
 
 /// A run's kept keypoints are filtered again when its band's reach falls below this fraction of

@@ -122,7 +122,7 @@ fn a_run_in_its_last_band_ends_at_the_first_step_that_does_not_move() {
 fn narrowed_keypoints_keep_every_one_a_narrow_band_can_match() {
     let (mesh, _) = box_scan();
     let (lower, upper) = mesh.bounds();
-    let mut rng = crate::rng::SplitMix64::new(3);
+    let mut rng = SplitMix64::new(3);
     let keypoints: Vec<Point3<f64>> = (0..5000)
         .map(|_| Point3::from(rng.unit_vector() * (0.8 * rng.uniform())))
         .collect();
@@ -161,7 +161,7 @@ fn a_thinned_level_keeps_one_keypoint_in_stride_spread_over_the_cloud_and_the_sa
     assert_eq!(thinning_for(f64::NAN), 1);
     let (mesh, _) = box_scan();
     let (lower, upper) = mesh.bounds();
-    let mut rng = crate::rng::SplitMix64::new(5);
+    let mut rng = SplitMix64::new(5);
     let keypoints: Vec<Point3<f64>> = (0..30_000)
         .map(|_| Point3::from(rng.unit_vector() * (0.4 * rng.uniform())))
         .collect();
