@@ -39,6 +39,8 @@ pub enum PartError {
         path: PathBuf,
         source: align_core::geometry::MeshError,
     },
+    #[error("'{path}': no .stl, .obj or .ply file in the folder")]
+    NoMeshes { path: PathBuf },
     #[error("'{path}': cannot list the folder: {source}")]
     Folder {
         path: PathBuf,
@@ -84,7 +86,11 @@ pub fn shipped_parts() -> Result<Vec<Part>, PartError> {
         .collect()
 }
 
-/// Every `.stl` in `dir` (the ABB IRB 1600's visual meshes are in metres), sorted by name.
+/// The mesh files a part can be read from (`read_mesh`'s formats), by extension.
+const MESH_EXTENSIONS: [&str; 3] = ["stl", "obj", "ply"];
+
+/// Every STL, OBJ or PLY file in `dir` (in metres, as the ABB IRB 1600's visual meshes are),
+/// sorted by name, each named after its file stem with `prefix`.
 pub fn parts_in(dir: &Path, prefix: &str) -> Result<Vec<Part>, PartError> {
     let entries = std::fs::read_dir(dir).map_err(|source| PartError::Folder {
         path: dir.to_owned(),
@@ -94,11 +100,19 @@ pub fn parts_in(dir: &Path, prefix: &str) -> Result<Vec<Part>, PartError> {
         .filter_map(Result::ok)
         .map(|entry| entry.path())
         .filter(|path| {
-            path.extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("stl"))
+            path.extension().is_some_and(|e| {
+                MESH_EXTENSIONS
+                    .iter()
+                    .any(|known| e.eq_ignore_ascii_case(known))
+            })
         })
         .collect();
     paths.sort();
+    if paths.is_empty() {
+        return Err(PartError::NoMeshes {
+            path: dir.to_owned(),
+        });
+    }
     paths.iter().map(|path| Part::read(path, prefix)).collect()
 }
 
@@ -287,4 +301,48 @@ fn floor(centre: &Point3<f64>, side_m: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>)
     let corners = [(-h, -h), (h, -h), (h, h), (-h, h)]
         .map(|(x, y)| Point3::new(centre.x + x, centre.y + y, 0.0));
     (corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{PartError, parts_in};
+    use align_core::io::{TriangleSoup, write_stl_binary};
+    use nalgebra::Point3;
+
+    fn tetrahedron() -> TriangleSoup {
+        TriangleSoup {
+            vertices: vec![
+                Point3::new(0.0, 0.0, 0.0),
+                Point3::new(0.1, 0.0, 0.0),
+                Point3::new(0.0, 0.1, 0.0),
+                Point3::new(0.0, 0.0, 0.1),
+            ],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn a_folder_gives_its_stl_and_obj_files_as_parts_named_after_them_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("cad-scans-parts-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("scratch folder");
+        write_stl_binary(&dir.join("b_link.STL"), &tetrahedron()).expect("stl");
+        let obj = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+        std::fs::write(dir.join("a_link.obj"), obj).expect("obj");
+        std::fs::write(dir.join("notes.txt"), "not a mesh").expect("txt");
+        let parts = parts_in(&dir, "robot_");
+        let empty = dir.join("empty");
+        std::fs::create_dir_all(&empty).expect("empty folder");
+        let refused = parts_in(&empty, "robot_");
+        std::fs::remove_dir_all(&dir).expect("clean up");
+        let names: Vec<String> = parts
+            .expect("two parts")
+            .into_iter()
+            .map(|p| p.name)
+            .collect();
+        assert_eq!(names, ["robot_a_link", "robot_b_link"]);
+        assert!(
+            matches!(refused, Err(PartError::NoMeshes { .. })),
+            "{refused:?}"
+        );
+    }
 }

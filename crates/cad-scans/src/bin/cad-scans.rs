@@ -16,10 +16,10 @@ use clap::Parser;
 /// small_gicp in the same run, and prints one Markdown table: successes (thesis pose distance
 /// under 1 mm) per delta, median pose errors and median times.
 ///
-/// Parts: the meshes shipped in crates/cad-scans/meshes (xArm7 and SO-ARM100 links) and the ABB
-/// IRB 1600 links read from --abb-dir when that folder exists. Peers: run
-/// scripts/peer-env.sh once (it installs Open3D and small_gicp in .venv), or pass --no-peers.
-/// Progress goes to stderr; the table (or --json) to stdout.
+/// Parts: the meshes shipped in crates/cad-scans/meshes (xArm7 and SO-ARM100 links), the ABB
+/// IRB 1600 links read from --abb-dir when that folder exists, and your own (--mesh-dir).
+/// Peers: run scripts/peer-env.sh once (it installs Open3D and small_gicp in .venv), or pass
+/// --no-peers. Progress goes to stderr; the table (or --json) to stdout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum IpsMode {
     Full,
@@ -45,6 +45,11 @@ struct Args {
     /// Only the meshes shipped in the repository.
     #[arg(long)]
     no_abb: bool,
+    /// A folder of parts of your own: every STL, OBJ or PLY file in it, in metres, named
+    /// `<folder>_<file stem>` (repeat for more folders). With --parts naming them, a corpus of
+    /// parts the project was never tuned on.
+    #[arg(long, value_name = "DIR")]
+    mesh_dir: Vec<PathBuf>,
     /// Only parts whose name contains one of these (comma-separated).
     #[arg(long, value_delimiter = ',')]
     parts: Vec<String>,
@@ -102,6 +107,22 @@ fn load_parts(args: &Args) -> Result<Vec<Part>, String> {
                 abb_dir.display()
             );
         }
+    }
+    for dir in &args.mesh_dir {
+        let folder = dir
+            .canonicalize()
+            .ok()
+            .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| "mesh".to_owned());
+        parts.extend(parts_in(dir, &format!("{folder}_")).map_err(|e| e.to_string())?);
+    }
+    let mut names: Vec<&str> = parts.iter().map(|p| p.name.as_str()).collect();
+    names.sort_unstable();
+    if let Some(twice) = names.windows(2).find(|pair| pair[0] == pair[1]) {
+        return Err(format!(
+            "two parts are named '{}': put files of the same name in folders of different names",
+            twice[0]
+        ));
     }
     if !args.parts.is_empty() {
         parts.retain(|p| args.parts.iter().any(|want| p.name.contains(want.as_str())));
