@@ -7,7 +7,7 @@ use align_core::geometry::Mesh;
 use align_core::geometry::shapes::extrude;
 use align_core::registration::articulated::RobotFitOptions;
 use align_core::registration::pca::{
-    DeltaSchedule, PcaOptions, PcaStep, align_cloud, pose_candidates_spread,
+    DeltaSchedule, PcaOptions, PcaStep, WideBandMatching, align_cloud, pose_candidates_spread,
 };
 use align_core::trials::clouds::{ScanOptions, pca_trial_scan, scan_part};
 use align_core::trials::{TrialRng, displace_about_centroid, random_displacement};
@@ -452,10 +452,20 @@ fn on_the_step_block_the_wide_band_slack_loses_no_delta() {
     // band's inner half is often another face. With the exploration's rule (approximate beyond
     // 2 cm) 150 mm fell from 17 to 6 of 30 (a probe before the rule was chosen); matching the
     // outer half only keeps every delta within a start or two of the exact runs.
+    //
+    // Scan to model in every band, as the slack was measured: it approximates the answers of the
+    // scan's keypoints only. With the default (the wide bands matched both ways, the model's
+    // samples matched exactly) 0.2 m gave 9 of 30 with the slack and 12 exact on this block,
+    // while on the CAD corpora the slack found 488 of 1200 and exact 482
+    // (docs/cad-scan-trials.md, fourteenth session).
     let mesh = step_block();
     let truth = truth();
     let cloud = cluttered_scan(&mesh, &truth);
-    let (with_slack, exact) = local_with_and_without_slack();
+    let [with_slack, exact] =
+        <[PcaOptions; 2]>::from(local_with_and_without_slack()).map(|o| PcaOptions {
+            wide_band_matching: WideBandMatching::ScanToModel,
+            ..o
+        });
     for delta_m in [0.1, 0.15, 0.2] {
         let successes = |options: &PcaOptions| {
             successes_of_30(&mesh, &truth, &cloud, delta_m, |seed| seed * 7 + 1, options)
@@ -477,11 +487,18 @@ fn a_local_run_from_far_off_starts_in_a_band_of_the_parts_radius() {
     // 7 against 1 and 4 against 0 of 30 (1 against 0 from 1 m, not run here: slow and says
     // little); the CAD scans 72 -> 75 and 75 -> 80 of 200 (docs/cad-scan-trials.md). From 50 mm,
     // below the radius, nothing changes.
+    //
+    // Scan to model in every band, as the cap was measured: a wide band's keypoints then pull
+    // by their number. With the default (the wide bands matched both ways, the part's samples
+    // each counting once) this block from 0.5 m gave 2 of 30 capped and 5 from delta0, and
+    // 7 and 6 from 0.3 m; on the CAD corpora the cap kept its lead, 488 of 1200 against 463
+    // (docs/cad-scan-trials.md, fourteenth session), so it stays the default.
     let mesh = step_block();
     let truth = truth();
     let cloud = cluttered_scan(&mesh, &truth);
     let capped = PcaOptions {
         starts: 0,
+        wide_band_matching: WideBandMatching::ScanToModel,
         ..PcaOptions::default()
     };
     let from_delta0 = PcaOptions {

@@ -32,7 +32,7 @@ pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::matching::{Lookup, Match, correspond, near_surface};
 use self::planes::without_large_planes;
 use self::polish::polish;
-pub use self::schedule::DeltaSchedule;
+pub use self::schedule::{DeltaSchedule, WideBandMatching};
 use self::schedule::{
     RunSlack, ScheduleRun, coarser_levels, model_to_scan_levels, run_schedule,
     run_schedule_on_levels,
@@ -110,16 +110,11 @@ pub struct PcaOptions {
     /// the floor and the fixtures than of the part, and they decide where the wide bands' steps
     /// go (see `local_first_band`). Off: the first band is delta0, the thesis's loop.
     pub local_band_within_radius: bool,
-    /// Without an exploration (`starts` 0), the run's bands wider than 10 cm match the other
-    /// way: points sampled on the part's surface each find the nearest scan keypoint in the band,
-    /// as Open3D's and small_gicp's ICP do (see `MODEL_TO_SCAN_ABOVE_M`). Each of the part's
-    /// points then counts once however much of the floor lies in the band, and the floor meets
-    /// the faces a lying part rests on. Off by default: on the CAD corpora it gained (76 -> 75,
-    /// 80 -> 83 local successes) but on the 20-triangle step block from 0.5 m it found 2 of 30
-    /// where the default finds 4 (crates/align-core/tests/pca.rs), and the rest of the suite was
-    /// not run with it on (docs/cad-scan-trials.md). Off: the scan's keypoints find the surface
-    /// in every band.
-    pub model_to_scan_wide_bands: bool,
+    /// Without an exploration (`starts` 0), how the run matches in the bands it runs on a
+    /// coarser keypoint level (24 mm and wider with the 5 mm voxel; see [`WideBandMatching`]).
+    /// Default: both ways. The narrow bands, the polish and the exploration's runs match scan
+    /// to model whatever this says.
+    pub wide_band_matching: WideBandMatching,
 }
 
 impl Default for PcaOptions {
@@ -153,7 +148,7 @@ impl Default for PcaOptions {
             fine_run: true,
             wide_band_slack: true,
             local_band_within_radius: true,
-            model_to_scan_wide_bands: false,
+            wide_band_matching: WideBandMatching::BothWays,
         }
     }
 }
@@ -474,8 +469,8 @@ fn locate(
         } else {
             RunSlack::EXACT
         };
-        let model_to_scan = if coarse.is_none() && options.model_to_scan_wide_bands {
-            model_to_scan_levels(mesh, &levels, schedule_from)
+        let model_to_scan = if coarse.is_none() {
+            model_to_scan_levels(mesh, &levels, options.wide_band_matching)
         } else {
             Vec::new()
         };

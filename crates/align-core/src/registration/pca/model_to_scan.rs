@@ -2,7 +2,7 @@
 //! find the nearest scan keypoint within the band, as the local peers (Open3D, small_gicp) match.
 //! In a band of decimetres the scan's keypoints are mostly floor and fixtures; matched to the
 //! part, they decide where the step goes by their number. Matched from the part, each of its
-//! points counts once (see `MODEL_TO_SCAN_ABOVE_M` in `schedule`).
+//! points counts once (see `WideBandMatching` in `schedule`).
 
 use std::collections::HashMap;
 

@@ -5,7 +5,7 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::matching::{Lookup, NO_HINT, correspond};
+use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::model_to_scan::{ModelSamples, ModelToScanLevel, ScanTree, correspond_model_to_scan};
 use super::{PcaOptions, step_for};
 use crate::geometry::Mesh;
@@ -27,6 +27,34 @@ pub enum DeltaSchedule {
     /// at a fixed pace, so a run spends a hundred steps in them whether the pose moves or not;
     /// on the CAD scans the same successes came in half the time (docs/cad-scan-trials.md).
     Halving,
+}
+
+/// How a local run matches in the bands it runs on a coarser keypoint level (see
+/// [`PcaOptions::wide_band_matching`]).
+///
+/// Scan to model, every keypoint in the band pulls the part, so the floor and a box beside it
+/// decide a wide band's step by their number: on robot links no setting had been tuned on
+/// (TIAGo Pro, Z1, Panda; `scripts/unseen-parts.sh`), TIAGo links 50 mm off ended 140-490 mm
+/// away (one lying link's first step: 72 of its 182 matches on the floor, 27 mm off the part
+/// against 2.3 mm for its own points), and the local stage found 60 of 200 scans where
+/// small_gicp found 99. Model to scan, each of the part's points counts once, but the faces the
+/// scanner never saw are pulled to whatever is near, and the big ABB links were lost. Local
+/// successes on the `replay` bench's corpora (the four of the ABB, xArm7 and SO-ARM100 links /
+/// the unseen set A): scan to model 322 / 60, model to scan 283 / 84, both ways 315 / 84 (with
+/// the scan's set weighted twice: 323 / 80; half: 306 / 86). On set B, held out until this was
+/// chosen, both ways and scan to model 89 each, ahead of or level with both peers at every
+/// delta with both ways only (docs/cad-scan-trials.md, fourteenth session).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WideBandMatching {
+    /// Each scan keypoint in the band to its closest point on the part, as the thesis and the
+    /// narrow bands match.
+    ScanToModel,
+    /// Points sampled on the part (one per occupied voxel of the level) each to the nearest scan
+    /// keypoint in the band, as Open3D and small_gicp match.
+    ModelToScan,
+    /// Both sets, the scan-to-model matches' weights scaled so that their total is the
+    /// model-to-scan matches' total.
+    BothWays,
 }
 
 /// A halving band halves once a step moves the pose (the thesis's distance) by less than this
@@ -257,32 +285,23 @@ pub(super) fn coarser_levels(
         .collect()
 }
 
-/// Bands wider than this match model to scan when the run is given the levels' samples and
-/// trees (see [`PcaOptions::model_to_scan_wide_bands`], off by default). Measured on the two CAD
-/// corpora (`replay` bench with the option on, docs/cad-scan-trials.md): with 10 cm the local successes went 76 -> 75 and
-/// 80 -> 83, ahead of or level with the better peer at every delta on both; with 5 cm 74 and 77,
-/// with 2.4 cm (every band on a coarser level) 67 and 76, with 15 and 20 cm 74/83 and 74/81.
-/// Matching both ways in those bands gave 76 and 84 but lost a 500 mm scan a peer found.
-pub(super) const MODEL_TO_SCAN_ABOVE_M: f64 = 0.1;
-
-/// The model samples and scan tree of each of `levels` (voxel, keypoints) whose bands, in a
-/// halving run from `delta0_m`, reach beyond [`MODEL_TO_SCAN_ABOVE_M`]; `None` for the others,
-/// the finest level always among them (the bands that set the precision match scan to model).
+/// The model samples and scan tree of each of `levels` (voxel, keypoints) but the finest, for a
+/// run that matches model to scan in the bands it runs on a coarser level (`None` for the finest:
+/// the narrow bands, which set the precision, match scan to model); empty when `matching` is
+/// scan to model only.
 pub(super) fn model_to_scan_levels(
     mesh: &Mesh,
     levels: &[(f64, &[Point3<f64>])],
-    delta0_m: f64,
+    matching: WideBandMatching,
 ) -> Vec<Option<ModelToScanLevel>> {
+    if matching == WideBandMatching::ScanToModel {
+        return Vec::new();
+    }
     levels
         .iter()
         .enumerate()
         .map(|(index, (voxel_m, keypoints))| {
-            // A level takes the bands from BAND_PER_LEVEL_VOXEL of its voxels up to where the
-            // next coarser one takes over.
-            let widest_band_m = levels
-                .get(index + 1)
-                .map_or(delta0_m, |(coarser_m, _)| coarser_m * BAND_PER_LEVEL_VOXEL);
-            (index > 0 && widest_band_m > MODEL_TO_SCAN_ABOVE_M).then(|| ModelToScanLevel {
+            (index > 0).then(|| ModelToScanLevel {
                 samples: ModelSamples::new(mesh, *voxel_m),
                 tree: ScanTree::new(keypoints),
             })
@@ -295,8 +314,8 @@ pub(super) fn model_to_scan_levels(
 /// band exceeds [`BAND_PER_LEVEL_VOXEL`] times. A band of decimetres holds the part's whole
 /// neighbourhood, and at the fine voxel a 500 mm local run spent seconds matching it exactly;
 /// the narrow bands at the end, which set the precision, run on the finest. A level with an
-/// entry in `model_to_scan` (empty: none) matches model to scan in its bands wider than
-/// [`MODEL_TO_SCAN_ABOVE_M`].
+/// entry in `model_to_scan` (empty: none) matches model to scan, or both ways, as
+/// `options.wide_band_matching` says.
 pub(super) fn run_schedule_on_levels(
     mesh: &Mesh,
     levels: &[(f64, &[Point3<f64>])],
@@ -350,15 +369,8 @@ pub(super) fn run_schedule_on_levels(
             exact_within_band_fraction: slack.exact_within_band_fraction,
             ..Lookup::exact(options.parallel)
         };
-        let matches = match model_to_scan
-            .get(level)
-            .and_then(Option::as_ref)
-            .filter(|_| delta > MODEL_TO_SCAN_ABOVE_M)
-        {
-            Some(model_to_scan) => {
-                correspond_model_to_scan(model_to_scan, &pose, delta, options.parallel)
-            }
-            None => correspond(
+        let scan_to_model = |reachable: &mut Reachable| {
+            correspond(
                 mesh,
                 &reachable.points,
                 &pose,
@@ -366,12 +378,32 @@ pub(super) fn run_schedule_on_levels(
                 (&lower, &upper),
                 lookup,
                 &mut reachable.hints,
-            ),
+            )
+        };
+        let (matches, keypoints_matched) = match model_to_scan.get(level).and_then(Option::as_ref) {
+            Some(model_to_scan) => {
+                let mut matches =
+                    correspond_model_to_scan(model_to_scan, &pose, delta, options.parallel);
+                let mut keypoints_matched = 0;
+                if options.wide_band_matching == WideBandMatching::BothWays {
+                    let mut from_scan = scan_to_model(reachable);
+                    keypoints_matched = from_scan.len();
+                    balance_weights(&matches, &mut from_scan);
+                    matches.extend(from_scan);
+                }
+                (matches, keypoints_matched)
+            }
+            None => {
+                let matches = scan_to_model(reachable);
+                let keypoints_matched = matches.len();
+                (matches, keypoints_matched)
+            }
         };
         if matches.len() < 6 {
             break;
         }
-        matched_voxel_area = Some((matches.len() * reachable.stride) as f64 * voxel_m * voxel_m);
+        matched_voxel_area =
+            Some((keypoints_matched * reachable.stride) as f64 * voxel_m * voxel_m);
         let Some(step) = step_for(&matches, options.step, radius_m) else {
             break;
         };
@@ -440,6 +472,20 @@ pub(super) fn run_schedule_on_levels(
         iterations,
         converged,
         delta,
+    }
+}
+
+/// Scales `from_scan`'s weights so that their total is `from_model`'s: each direction has the
+/// same say in a step however many of the band's keypoints are clutter. Left as they are when
+/// either set weighs nothing.
+fn balance_weights(from_model: &[Match], from_scan: &mut [Match]) {
+    let model_total: f64 = from_model.iter().map(|m| m.weight).sum();
+    let scan_total: f64 = from_scan.iter().map(|m| m.weight).sum();
+    if model_total > 0.0 && scan_total > 0.0 {
+        let scale = model_total / scan_total;
+        for m in from_scan {
+            m.weight *= scale;
+        }
     }
 }
 

@@ -266,3 +266,28 @@ fn only_a_halving_run_from_a_wide_band_gets_coarser_keypoints() {
     let levels = coarser_levels(&keypoints, 0.5, &halving);
     assert!(levels[0].1.len() < keypoints.len() && levels[1].1.len() < levels[0].1.len());
 }
+
+fn a_match(weight: f64) -> Match {
+    Match {
+        point: Point3::origin(),
+        surface: Point3::origin(),
+        normal: Vector3::z(),
+        distance: 0.0,
+        weight,
+    }
+}
+
+#[test]
+fn matched_both_ways_the_scans_set_weighs_as_much_as_the_parts_and_keeps_its_proportions() {
+    // The part's 3 samples against 6 keypoints, most of them clutter: both sets weigh 2.5.
+    let from_model = [0.5, 1.0, 1.0].map(a_match);
+    let mut from_scan = [1.0, 1.0, 0.5, 0.5, 1.0, 1.0].map(a_match);
+    balance_weights(&from_model, &mut from_scan);
+    let scan_total: f64 = from_scan.iter().map(|m| m.weight).sum();
+    assert!((scan_total - 2.5).abs() < 1e-12, "{scan_total}");
+    assert!((from_scan[0].weight - 2.0 * from_scan[2].weight).abs() < 1e-12);
+    // Nothing matched one way: the other set is left as it is.
+    let mut alone = [1.0, 0.5].map(a_match);
+    balance_weights(&[], &mut alone);
+    assert_eq!(alone.map(|m| m.weight), [1.0, 0.5]);
+}
