@@ -35,7 +35,7 @@ pub enum DeltaSchedule {
 /// Scan to model, every keypoint in the band pulls the part, so the floor and a box beside it
 /// decide a wide band's step by their number: on robot links no setting had been tuned on
 /// (TIAGo Pro, Z1, Panda; `scripts/unseen-parts.sh`), TIAGo links 50 mm off ended 140-490 mm
-/// away (one lying link's first step: 72 of its 182 matches on the floor, 27 mm off the part
+/// away (one lying link's first step: 72 of its 182 matches on clutter, 27 mm off the part
 /// against 2.3 mm for its own points), and the local stage found 60 of 200 scans where
 /// small_gicp found 99. Model to scan, each of the part's points counts once, but the faces the
 /// scanner never saw are pulled to whatever is near, and the big ABB links were lost. Local
