@@ -384,10 +384,11 @@ pub(super) fn run_schedule_on_levels(
             Some(model_to_scan) => {
                 let mut matches =
                     correspond_model_to_scan(model_to_scan, &pose, delta, options.parallel);
-                let mut keypoints_matched = 0;
+                // Model to scan alone matches no keypoint: nothing to thin the next level by.
+                let mut keypoints_matched = None;
                 if options.wide_band_matching == WideBandMatching::BothWays {
                     let mut from_scan = scan_to_model(reachable);
-                    keypoints_matched = from_scan.len();
+                    keypoints_matched = Some(from_scan.len());
                     balance_weights(&matches, &mut from_scan);
                     matches.extend(from_scan);
                 }
@@ -395,15 +396,16 @@ pub(super) fn run_schedule_on_levels(
             }
             None => {
                 let matches = scan_to_model(reachable);
-                let keypoints_matched = matches.len();
+                let keypoints_matched = Some(matches.len());
                 (matches, keypoints_matched)
             }
         };
         if matches.len() < 6 {
             break;
         }
-        matched_voxel_area =
-            Some((keypoints_matched * reachable.stride) as f64 * voxel_m * voxel_m);
+        if let Some(keypoints) = keypoints_matched {
+            matched_voxel_area = Some((keypoints * reachable.stride) as f64 * voxel_m * voxel_m);
+        }
         let Some(step) = step_for(&matches, options.step, radius_m) else {
             break;
         };
