@@ -39,6 +39,10 @@ pub enum PartError {
         path: PathBuf,
         source: align_core::geometry::MeshError,
     },
+    #[error(
+        "part '{name}' is {radius_m:.0} m in radius: meshes are read in metres, and one drawn in millimetres comes out 1000 times too large"
+    )]
+    NotMetres { name: String, radius_m: f64 },
     #[error("'{path}': no .stl, .obj or .ply file in the folder")]
     NoMeshes { path: PathBuf },
     #[error("'{path}': cannot list the folder: {source}")]
@@ -76,6 +80,22 @@ impl Part {
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
         Self::from_soup(format!("{prefix}{stem}"), soup)
     }
+}
+
+/// A part read in metres with a radius beyond this was drawn in other units (the largest here,
+/// the ABB IRB 1600's base, is 0.4 m; a 200 mm link drawn in millimetres reads as 100 m).
+const MAX_PART_RADIUS_M: f64 = 5.0;
+
+/// Refuses a part too large to have been read in the right units (see [`MAX_PART_RADIUS_M`]).
+pub fn check_metres(part: &Part) -> Result<(), PartError> {
+    let radius_m = part.mesh.radius_m();
+    if radius_m > MAX_PART_RADIUS_M {
+        return Err(PartError::NotMetres {
+            name: part.name.clone(),
+            radius_m,
+        });
+    }
+    Ok(())
 }
 
 /// The shipped meshes.
@@ -305,7 +325,7 @@ fn floor(centre: &Point3<f64>, side_m: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>)
 
 #[cfg(test)]
 mod tests {
-    use super::{PartError, parts_in};
+    use super::{Part, PartError, check_metres, parts_in};
     use align_core::io::{TriangleSoup, write_stl_binary};
     use nalgebra::Point3;
 
@@ -344,5 +364,18 @@ mod tests {
             matches!(refused, Err(PartError::NoMeshes { .. })),
             "{refused:?}"
         );
+    }
+
+    #[test]
+    fn a_part_drawn_in_millimetres_is_refused_naming_the_units() {
+        let in_metres = Part::from_soup("link", tetrahedron()).expect("a part");
+        assert!(check_metres(&in_metres).is_ok());
+        let mut soup = tetrahedron();
+        for vertex in &mut soup.vertices {
+            *vertex *= 1000.0;
+        }
+        let in_millimetres = Part::from_soup("link", soup).expect("a part");
+        let refused = check_metres(&in_millimetres).expect_err("100 m across");
+        assert!(refused.to_string().contains("millimetres"), "{refused}");
     }
 }

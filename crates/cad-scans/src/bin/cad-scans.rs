@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use cad_scans::peers::{PEERS, default_script, run_peers};
 use cad_scans::scanner::ScanNoise;
-use cad_scans::scenes::{DEFAULT_ABB_DIR, Part, parts_in, shipped_parts};
+use cad_scans::scenes::{DEFAULT_ABB_DIR, Part, check_metres, parts_in, shipped_parts};
 use cad_scans::table::{IPS, IPS_LOCAL, Scored, markdown, records, rows};
 use cad_scans::trials::{CorpusOptions, Trial, prepare_trials, run_ips, write_manifest};
 use clap::Parser;
@@ -114,7 +114,11 @@ fn load_parts(args: &Args) -> Result<Vec<Part>, String> {
             .ok()
             .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
             .unwrap_or_else(|| "mesh".to_owned());
-        parts.extend(parts_in(dir, &format!("{folder}_")).map_err(|e| e.to_string())?);
+        let own = parts_in(dir, &format!("{folder}_")).map_err(|e| e.to_string())?;
+        for part in &own {
+            check_metres(part).map_err(|e| e.to_string())?;
+        }
+        parts.extend(own);
     }
     let mut names: Vec<&str> = parts.iter().map(|p| p.name.as_str()).collect();
     names.sort_unstable();
