@@ -35,7 +35,7 @@ use self::polish::polish;
 pub use self::schedule::{DeltaSchedule, WideBandMatching};
 use self::schedule::{
     RunSlack, ScheduleRun, coarser_levels, model_to_scan_levels, run_schedule,
-    run_schedule_on_levels,
+    run_schedule_on_levels, wide_band_samples,
 };
 use super::sampling::{voxel_centroids, voxel_representatives};
 use super::svd::weighted_svd;
@@ -366,39 +366,64 @@ fn locate(
     if !(delta0_m.is_finite() && delta0_m > 0.0) {
         return Err(PcaError::BadDelta(delta0_m));
     }
+    let local = options.starts == 0;
+    // A local run's first band (see `schedule_from` below).
+    let local_schedule_from = if options.local_band_within_radius {
+        local_first_band(mesh, delta0_m, options)
+    } else {
+        delta0_m
+    };
     let cropped;
-    let cloud = if options.starts == 0 {
+    let cloud = if local {
         cropped = within_local_reach(mesh, cloud, base_from_part_start, delta0_m);
         cropped.as_slice()
     } else {
         cloud
     };
-    let keypoints = if options.voxel_centroids {
-        voxel_centroids(cloud, options.voxel_m)
-    } else {
-        voxel_representatives(cloud, options.voxel_m)
+    let prepare_scan = || -> Result<Vec<Point3<f64>>, PcaError> {
+        let keypoints = if options.voxel_centroids {
+            voxel_centroids(cloud, options.voxel_m)
+        } else {
+            voxel_representatives(cloud, options.voxel_m)
+        };
+        // Every point within delta of the part counts here: seen from far off a small part,
+        // most points' closest feature is an edge or a corner, and a scan with the part and the
+        // floor within a metre of the start was refused for "1-2 points within delta"
+        // (docs/cad-scan-trials.md).
+        let first = near_surface(
+            mesh,
+            &keypoints,
+            base_from_part_start,
+            delta0_m,
+            options.parallel,
+        );
+        if first.len() < 6 {
+            return Err(PcaError::TooFewPoints {
+                kept: first.len(),
+                delta_m: delta0_m,
+            });
+        }
+        check_constrains_pose(&first, mesh.radius_m())?;
+        Ok(keypoints)
     };
-    // Every point within delta of the part counts here: seen from far off a small part, most
-    // points' closest feature is an edge or a corner, and a scan with the part and the floor
-    // within a metre of the start was refused for "1-2 points within delta"
-    // (docs/cad-scan-trials.md).
-    let first = near_surface(
-        mesh,
-        &keypoints,
-        base_from_part_start,
-        delta0_m,
-        options.parallel,
-    );
-    if first.len() < 6 {
-        return Err(PcaError::TooFewPoints {
-            kept: first.len(),
-            delta_m: delta0_m,
-        });
-    }
-    check_constrains_pose(&first, mesh.radius_m())?;
+    // The part's samples for the wide bands depend on the part alone: on two cores they are
+    // drawn while the scan is binned, mostly serial work (docs/BENCHMARKS.md).
+    let sample_part = || {
+        if local {
+            wide_band_samples(mesh, local_schedule_from, options)
+        } else {
+            Vec::new()
+        }
+    };
+    let (keypoints, part_samples) = if options.parallel {
+        rayon::join(prepare_scan, sample_part)
+    } else {
+        (prepare_scan(), sample_part())
+    };
+    let keypoints = keypoints?;
     let mut start = *base_from_part_start;
     let mut starts = 1;
-    let mut schedule_from = delta0_m;
+    let mut schedule_from = local_schedule_from;
     let mut explored_ends: Vec<(f64, Isometry3<f64>)> = Vec::new();
     let coarse = (options.starts > 0).then(|| Coarse::new(mesh, cloud, options));
     if let Some(coarse) = &coarse {
@@ -429,8 +454,6 @@ fn locate(
         // The exploration ended within a few voxels of its optimum: refining from a wide band
         // again would only let the clutter back in.
         schedule_from = delta0_m.min(3.0 * options.delta_min_m);
-    } else if options.local_band_within_radius {
-        schedule_from = local_first_band(mesh, delta0_m, options);
     }
     // The given keypoints as the finest level, voxel 0 so that every band may use them. After an
     // exploration the run starts at 3 cm, on the fine keypoints only: on 10 mm ones a small
@@ -470,7 +493,7 @@ fn locate(
             RunSlack::EXACT
         };
         let model_to_scan = if coarse.is_none() {
-            model_to_scan_levels(mesh, &levels, options.wide_band_matching)
+            model_to_scan_levels(&levels, part_samples, options.parallel)
         } else {
             Vec::new()
         };

@@ -4,6 +4,7 @@
 //! it, the wide bands on coarser keypoints).
 
 use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
 
 use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::model_to_scan::{ModelSamples, ModelToScanLevel, ScanTree, correspond_model_to_scan};
@@ -266,14 +267,10 @@ pub(super) fn run_schedule(
     )
 }
 
-/// The keypoints at the coarser voxel sizes a halving run from `delta0_m` can use (voxel,
-/// keypoints), finest first; none for a cosine schedule (the thesis's loop runs on one set) or a
-/// band too narrow for any.
-pub(super) fn coarser_levels(
-    keypoints: &[Point3<f64>],
-    delta0_m: f64,
-    options: &PcaOptions,
-) -> Vec<(f64, Vec<Point3<f64>>)> {
+/// The voxels of the coarser keypoint levels a halving run from `delta0_m` can use, finest
+/// first; none for a cosine schedule (the thesis's loop runs on one set) or a band too narrow
+/// for any.
+pub(super) fn coarser_voxels(delta0_m: f64, options: &PcaOptions) -> Vec<f64> {
     if options.schedule != DeltaSchedule::Halving {
         return Vec::new();
     }
@@ -281,31 +278,82 @@ pub(super) fn coarser_levels(
         .iter()
         .map(|factor| options.voxel_m * factor)
         .filter(|voxel_m| voxel_m * BAND_PER_LEVEL_VOXEL < delta0_m)
-        .map(|voxel_m| (voxel_m, voxel_representatives(keypoints, voxel_m)))
         .collect()
+}
+
+/// The keypoints at each of [`coarser_voxels`] (voxel, keypoints), finest first, binned on all
+/// cores when `options.parallel`: each binning is mostly serial work.
+pub(super) fn coarser_levels(
+    keypoints: &[Point3<f64>],
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Vec<(f64, Vec<Point3<f64>>)> {
+    let level = |voxel_m: f64| (voxel_m, voxel_representatives(keypoints, voxel_m));
+    let voxels = coarser_voxels(delta0_m, options);
+    if options.parallel {
+        voxels.into_par_iter().map(level).collect()
+    } else {
+        voxels.into_iter().map(level).collect()
+    }
+}
+
+/// The part's samples for each of [`coarser_voxels`], for a local run that matches model to
+/// scan in its wide bands (none when `options.wide_band_matching` is scan to model only). They
+/// depend on the part alone, so that a local alignment samples the part while it bins the scan
+/// (see `locate`).
+pub(super) fn wide_band_samples(
+    mesh: &Mesh,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Vec<ModelSamples> {
+    if options.wide_band_matching == WideBandMatching::ScanToModel {
+        return Vec::new();
+    }
+    let voxels = coarser_voxels(delta0_m, options);
+    if options.parallel {
+        voxels
+            .into_par_iter()
+            .map(|voxel_m| ModelSamples::new(mesh, voxel_m))
+            .collect()
+    } else {
+        voxels
+            .into_iter()
+            .map(|voxel_m| ModelSamples::new(mesh, voxel_m))
+            .collect()
+    }
 }
 
 /// The model samples and scan tree of each of `levels` (voxel, keypoints) but the finest, for a
 /// run that matches model to scan in the bands it runs on a coarser level (`None` for the finest:
-/// the narrow bands, which set the precision, match scan to model); empty when `matching` is
-/// scan to model only.
+/// the narrow bands, which set the precision, match scan to model); empty when `samples` (one
+/// per coarser level, from [`wide_band_samples`]) is.
 pub(super) fn model_to_scan_levels(
-    mesh: &Mesh,
     levels: &[(f64, &[Point3<f64>])],
-    matching: WideBandMatching,
+    samples: Vec<ModelSamples>,
+    parallel: bool,
 ) -> Vec<Option<ModelToScanLevel>> {
-    if matching == WideBandMatching::ScanToModel {
+    if samples.is_empty() {
         return Vec::new();
     }
-    levels
-        .iter()
-        .enumerate()
-        .map(|(index, (voxel_m, keypoints))| {
-            (index > 0).then(|| ModelToScanLevel {
-                samples: ModelSamples::new(mesh, *voxel_m),
-                tree: ScanTree::new(keypoints),
-            })
-        })
+    let coarser = levels.get(1..).unwrap_or_default();
+    let trees: Vec<ScanTree> = if parallel {
+        coarser
+            .par_iter()
+            .map(|(_, keypoints)| ScanTree::new(keypoints))
+            .collect()
+    } else {
+        coarser
+            .iter()
+            .map(|(_, keypoints)| ScanTree::new(keypoints))
+            .collect()
+    };
+    std::iter::once(None)
+        .chain(
+            samples
+                .into_iter()
+                .zip(trees)
+                .map(|(samples, tree)| Some(ModelToScanLevel { samples, tree })),
+        )
         .collect()
 }
 
@@ -333,6 +381,15 @@ pub(super) fn run_schedule_on_levels(
     let mut reachable: Vec<Reachable> = levels
         .iter()
         .map(|_| Reachable::new(&lower, &upper, delta0_m))
+        .collect();
+    // Each model sample's keypoint at the last step, per level (see correspond_model_to_scan).
+    let mut sample_hints: Vec<Vec<u32>> = model_to_scan
+        .iter()
+        .map(|level| {
+            level
+                .as_ref()
+                .map_or(Vec::new(), |l| vec![NO_HINT; l.samples.points.len()])
+        })
         .collect();
     let radius_m = mesh.radius_m();
     let mut pose = *start;
@@ -382,8 +439,13 @@ pub(super) fn run_schedule_on_levels(
         };
         let (matches, keypoints_matched) = match model_to_scan.get(level).and_then(Option::as_ref) {
             Some(model_to_scan) => {
-                let mut matches =
-                    correspond_model_to_scan(model_to_scan, &pose, delta, options.parallel);
+                let mut matches = correspond_model_to_scan(
+                    model_to_scan,
+                    &pose,
+                    delta,
+                    options.parallel,
+                    &mut sample_hints[level],
+                );
                 // Model to scan alone matches no keypoint: nothing to thin the next level by.
                 let mut keypoints_matched = None;
                 if options.wide_band_matching == WideBandMatching::BothWays {
