@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use super::matching::{Match, NO_HINT};
 use crate::geometry::Mesh;
+use crate::registration::sampling::floor_index;
 use crate::rng::SplitMix64;
 
 /// Leaves of the tree hold at most this many points, searched one by one.
@@ -134,9 +135,9 @@ impl ModelSamples {
                 }
                 let point = a + (b - a) * u + (c - a) * v;
                 let key = (
-                    (point.x / spacing_m).floor() as i64,
-                    (point.y / spacing_m).floor() as i64,
-                    (point.z / spacing_m).floor() as i64,
+                    floor_index(point.x / spacing_m),
+                    floor_index(point.y / spacing_m),
+                    floor_index(point.z / spacing_m),
                 );
                 kept.entry(key).or_insert((point, normal));
             }
