@@ -5,6 +5,9 @@
 # collision meshes (it showed the local stage's first failure on parts of others, and the change
 # that followed was chosen on it). Set B, held out: Universal Robots' UR5 collision meshes,
 # Unitree's G1 humanoid and Agility's Cassie, looked at once, after that change was chosen.
+# Set C, held out from the fifteenth session on: PAL Robotics' TALOS arm, Willow Garage's PR2 arm
+# and Unitree's Go2 leg (collision hulls), scanned with both peers once the changes that session
+# made on the other sets were chosen.
 # They come from the PyPI wheel example-robot-data 6.0.0 (the wheel the shipped xArm7 and
 # SO-ARM100 meshes came from) and are written, checked by SHA-256, into one folder per robot
 # under OUT (default target/unseen-parts); nothing is copied into the repository.
@@ -13,11 +16,12 @@
 #   target/release/cad-scans --scans 40 --ips local --seed 64 \
 #       --mesh-dir OUT/tiago_pro --mesh-dir OUT/z1 --mesh-dir OUT/panda \
 #       --parts tiago_pro_,z1_,panda_ --out DIR          # set A
-#   (set B: --mesh-dir OUT/ur5 --mesh-dir OUT/g1 --mesh-dir OUT/cassie --parts ur5_,g1_,cassie_)
+#   (set B: --mesh-dir OUT/ur5 --mesh-dir OUT/g1 --mesh-dir OUT/cassie --parts ur5_,g1_,cassie_;
+#    set C: --mesh-dir OUT/talos --mesh-dir OUT/pr2 --mesh-dir OUT/go2 --parts talos_,pr2_,go2_)
 #
 # Licenses, as the wheel's README of each description names them (panda_description also
 # carries its LICENSE file): tiago_pro Apache-2.0, z1 MPL-2.0, panda Apache-2.0, ur BSD,
-# g1 BSD-3-Clause, cassie ISC. They are only read here, never shipped.
+# g1 BSD-3-Clause, cassie ISC, talos_data Apache-2.0, pr2 BSD, go2 MPL-2.0. They are only read here, never shipped.
 # Idempotent: files already in place with the right hash are kept.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -77,6 +81,27 @@ PARTS = [
      "2cbf3f004697508286be5cf2684b6e1251c019cc51bd5a816fa44882798ccc70"),
     ("cassie_description/meshes/tarsus.stl", "cassie/tarsus.stl",
      "890913b018136cbd3d015745263e764e69df3e2aa371f3e7bea9cd7a9d682a12"),
+    # Set C, held out: scanned once, after the fifteenth session's changes were chosen.
+    ("talos_data/meshes/arm/arm_1.stl", "talos/arm_1.stl",
+     "520e084533a0a0e90aafadb1dd1b0fa4f646b12dac8df691030d768e328a92e5"),
+    ("talos_data/meshes/arm/arm_2.stl", "talos/arm_2.stl",
+     "e55c0a0eaba43f37b44a6ea3be2037366cae8c34fd06293b3dcf4730a982c9ca"),
+    ("talos_data/meshes/arm/arm_3.stl", "talos/arm_3.stl",
+     "f22ac1f25dd54805810b05362a62aaa690f49e21ce7adb8ff921ba07f9f2257d"),
+    ("talos_data/meshes/arm/arm_5.stl", "talos/arm_5.stl",
+     "e7bacaff657c70c84f18130a8c6c74404244a63f220d61d1c9b05cfa0dbb1981"),
+    ("pr2_description/meshes/upper_arm_v0/upper_arm.stl", "pr2/upper_arm.stl",
+     "823a410be7cfea0440309a585f9a11d30d4e387ff5674f90eb9e0526729e05b6"),
+    ("pr2_description/meshes/forearm_v0/forearm.stl", "pr2/forearm.stl",
+     "3dab89b1fc8a76569b88d917684a05f59015c6325478c88296ded14bac08cbf0"),
+    ("pr2_description/meshes/upper_arm_v0/elbow_flex.stl", "pr2/elbow_flex.stl",
+     "af7438c914bffa6bfbdc7c218fed06f512fc4a0739992a05496fdd9c0f7116e7"),
+    ("go2_description/collisions/thigh_convex.stl", "go2/thigh.stl",
+     "79e1a4e04a4ffa8e6ea248b36beefed2381768f54b97b182f78fdc9cab391264"),
+    ("go2_description/collisions/calf_upper_convex.stl", "go2/calf_upper.stl",
+     "912bf59fe55daef8e56ba4529bc3988d9f4c53b0cd298f31ca49530bfc1e1a6e"),
+    ("go2_description/collisions/hip_convex.stl", "go2/hip.stl",
+     "e90792c60b892c57834a0beb0b340c6da812175e7a37dfc679693e1a59222929"),
 ]
 with zipfile.ZipFile(wheel) as archive:
     names = archive.namelist()
@@ -94,5 +119,5 @@ with zipfile.ZipFile(wheel) as archive:
         with open(path, "wb") as f:
             f.write(data)
 print(f"unseen-parts: {len(PARTS)} meshes; set A in {out}/tiago_pro, {out}/z1, {out}/panda;"
-      f" set B in {out}/ur5, {out}/g1, {out}/cassie")
+      f" set B in {out}/ur5, {out}/g1, {out}/cassie; set C in {out}/talos, {out}/pr2, {out}/go2")
 EOF

@@ -35,14 +35,28 @@ const LARGER_THAN_PART: f64 = 2.0;
 /// more of the scan than the part's whole surface could ([`LARGER_THAN_PART`] times its area
 /// over a voxel's face).
 pub(super) fn without_large_planes(
-    coarse: Vec<Point3<f64>>,
+    mut coarse: Vec<Point3<f64>>,
     mesh: &Mesh,
     voxel_m: f64,
 ) -> Vec<Point3<f64>> {
+    let planes = large_planes(&coarse, mesh, voxel_m);
+    coarse.retain(|p| !on_a_plane(p, &planes));
+    coarse
+}
+
+/// The planes [`without_large_planes`] takes out of `coarse` (a point on each and its unit
+/// normal), largest first: each the plane most of the points left lie on, while it holds more
+/// of them than the part's whole surface could.
+pub(super) fn large_planes(
+    coarse: &[Point3<f64>],
+    mesh: &Mesh,
+    voxel_m: f64,
+) -> Vec<(Point3<f64>, Vector3<f64>)> {
     let part_area = mesh.area_m2();
     let most_keypoints = LARGER_THAN_PART * part_area / (voxel_m * voxel_m);
-    let mut kept = coarse;
+    let mut kept = coarse.to_vec();
     let mut rng = SplitMix64::new(0x9e37_79b9_7f4a_7c15 ^ kept.len() as u64);
+    let mut planes = Vec::new();
     for _ in 0..MAX_PLANES {
         let Some((origin, normal)) = largest_plane(&kept, &mut rng) else {
             break;
@@ -53,8 +67,16 @@ pub(super) fn without_large_planes(
             break;
         }
         kept.retain(|p| !on(p));
+        planes.push((origin, normal));
     }
-    kept
+    planes
+}
+
+/// Whether `point` lies on one of `planes`.
+pub(super) fn on_a_plane(point: &Point3<f64>, planes: &[(Point3<f64>, Vector3<f64>)]) -> bool {
+    planes
+        .iter()
+        .any(|(origin, normal)| (point - origin).dot(normal).abs() <= ON_PLANE_M)
 }
 
 /// The plane through three of `points` that most of a sample of them lie on, as a point on it

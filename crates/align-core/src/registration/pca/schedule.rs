@@ -8,7 +8,8 @@ use rayon::prelude::*;
 
 use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::model_to_scan::{ModelSamples, ModelToScanLevel, ScanTree, correspond_model_to_scan};
-use super::{PcaOptions, step_for};
+use super::planes::{large_planes, on_a_plane};
+use super::{PcaOptions, WEAK_DIRECTION_FRACTION, step_along};
 use crate::geometry::Mesh;
 use crate::registration::convergence::{StopCriterion, pose_distance};
 use crate::registration::sampling::voxel_representatives;
@@ -357,6 +358,32 @@ pub(super) fn model_to_scan_levels(
         .collect()
 }
 
+/// The coarser of `levels` (voxel, keypoints; all but the finest) without the points of the
+/// planes larger than the part, found once on the coarsest level (see
+/// `PcaOptions::wide_band_without_planes`): what the scan-to-model half of a run's wide bands
+/// matches. Empty when there is no coarser level.
+pub(super) fn coarser_without_large_planes(
+    mesh: &Mesh,
+    levels: &[(f64, &[Point3<f64>])],
+) -> Vec<(f64, Vec<Point3<f64>>)> {
+    let (Some(coarser), Some((coarsest_voxel_m, coarsest))) = (levels.get(1..), levels.last())
+    else {
+        return Vec::new();
+    };
+    let planes = large_planes(coarsest, mesh, *coarsest_voxel_m);
+    coarser
+        .iter()
+        .map(|(voxel_m, points)| {
+            let kept = points
+                .iter()
+                .filter(|p| !on_a_plane(p, &planes))
+                .copied()
+                .collect();
+            (*voxel_m, kept)
+        })
+        .collect()
+}
+
 /// One run of the thesis's loop on keypoint levels (voxel, keypoints), finest first (voxel 0,
 /// so that every band may use it): each step runs on the coarsest level whose voxel the step's
 /// band exceeds [`BAND_PER_LEVEL_VOXEL`] times. A band of decimetres holds the part's whole
@@ -468,7 +495,12 @@ pub(super) fn run_schedule_on_levels(
         if let Some(keypoints) = keypoints_matched {
             matched_voxel_area = Some((keypoints * reachable.stride) as f64 * voxel_m * voxel_m);
         }
-        let Some(step) = step_for(&matches, options.step, radius_m) else {
+        let weak_fraction = if level > 0 && options.wide_band_skips_weak_directions {
+            WEAK_DIRECTION_FRACTION
+        } else {
+            0.0
+        };
+        let Some(step) = step_along(&matches, options.step, radius_m, weak_fraction) else {
             break;
         };
         let previous = pose;
