@@ -847,3 +847,78 @@ fn point_to_plane(matches: &[Match], radius_m: f64, weak_fraction: f64) -> Optio
     let shift = centre + translation - rotation * centre;
     Some(Isometry3::from_parts(Translation3::from(shift), rotation))
 }
+
+#[cfg(test)]
+mod step_tests {
+    use super::*;
+
+    fn matched(surface: Vector3<f64>, normal: Vector3<f64>, off_m: f64, weight: f64) -> Match {
+        Match {
+            point: Point3::from(surface + normal * off_m),
+            surface: Point3::from(surface),
+            normal,
+            distance: off_m.abs(),
+            weight,
+        }
+    }
+
+    #[test]
+    fn a_step_leaves_out_the_direction_its_matches_barely_constrain_and_keeps_the_others() {
+        // A cylinder 50 mm in radius along z, every point on it, and one lightly weighted match
+        // on a flat beside it that turns the part about its axis: the spin is what the matches
+        // barely constrain.
+        let radius_m = 0.05;
+        let mut matches = Vec::new();
+        for k in 0..36 {
+            let angle = k as f64 * std::f64::consts::TAU / 36.0;
+            let normal = Vector3::new(angle.cos(), angle.sin(), 0.0);
+            for z in [-0.1, 0.0, 0.1] {
+                matches.push(matched(
+                    normal * radius_m + Vector3::z() * z,
+                    normal,
+                    0.0,
+                    1.0,
+                ));
+            }
+        }
+        matches.push(matched(Vector3::x() * radius_m, Vector3::y(), 0.005, 0.01));
+        let whole = point_to_plane(&matches, radius_m, 0.0).unwrap();
+        let constrained = point_to_plane(&matches, radius_m, WEAK_DIRECTION_FRACTION).unwrap();
+        let whole_spin_rad = whole.rotation.scaled_axis().z;
+        // The flat's 5 mm turn it a tenth of a radian; without the spin, what is left is the
+        // flat's share of the well-constrained sideways shift.
+        assert!(whole_spin_rad.abs() > 0.05, "{whole}");
+        assert!(
+            constrained.rotation.angle() < 1e-3 * whole_spin_rad.abs(),
+            "{constrained}"
+        );
+        assert!(
+            constrained.translation.vector.norm() < 1e-5,
+            "{constrained}"
+        );
+
+        // A box's six faces constrain every direction: the same step either way.
+        let mut rng = crate::rng::SplitMix64::new(5);
+        let mut matches = Vec::new();
+        for axis in 0..3 {
+            for sign in [-1.0, 1.0] {
+                let mut normal = Vector3::zeros();
+                normal[axis] = sign;
+                for _ in 0..20 {
+                    let mut surface = Vector3::new(
+                        rng.uniform() - 0.5,
+                        rng.uniform() - 0.5,
+                        rng.uniform() - 0.5,
+                    ) * 0.1;
+                    surface[axis] = 0.05 * sign;
+                    matches.push(matched(surface, normal, 0.002 * (rng.uniform() - 0.3), 1.0));
+                }
+            }
+        }
+        let whole = point_to_plane(&matches, 0.09, 0.0).unwrap();
+        let constrained = point_to_plane(&matches, 0.09, WEAK_DIRECTION_FRACTION).unwrap();
+        assert!((whole.translation.vector - constrained.translation.vector).norm() < 1e-12);
+        assert!(whole.rotation.angle_to(&constrained.rotation) < 1e-12);
+        assert!(whole.translation.vector.norm() > 1e-4, "{whole}");
+    }
+}
