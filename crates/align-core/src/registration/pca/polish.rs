@@ -6,9 +6,10 @@
 
 use nalgebra::{Isometry3, Point3};
 
+use super::PcaOptions;
 use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::schedule::FIXED_POINT_FRACTION;
-use super::{PcaOptions, step_for};
+use super::step::step_for;
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
 

@@ -6,10 +6,11 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
+use super::PcaOptions;
 use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::model_to_scan::{ModelSamples, ModelToScanLevel, ScanTree, correspond_model_to_scan};
 use super::planes::{large_planes, on_a_plane};
-use super::{PcaOptions, WEAK_DIRECTION_FRACTION, step_along};
+use super::step::{WEAK_DIRECTION_FRACTION, step_along};
 use crate::geometry::Mesh;
 use crate::registration::convergence::{StopCriterion, pose_distance};
 use crate::registration::sampling::voxel_representatives;
