@@ -101,10 +101,10 @@ impl Bins {
         match Packing::of(&keys) {
             Some(packing) => {
                 // Packed keys in a radix sort: a few passes over the pairs instead of a
-                // comparison sort. A local alignment bins a cell's points near the part
-                // (30-65k) at 5 mm and its keypoints at two coarser voxels: a comparison sort
-                // on both cores took 2.5-5 ms for the first, 2.4-4.7 ms for the other two, of a
-                // 30-90 ms alignment on the CAD scans (an instrumented build, docs/BENCHMARKS.md).
+                // comparison sort on both cores. A local alignment bins a cell's points near the
+                // part (30-65k) at 5 mm and its keypoints at two coarser voxels: binning took
+                // 2.5-5 ms for the first and 2.4-4.7 ms for the other two, of a 30-90 ms
+                // alignment on the CAD scans (an instrumented build, docs/BENCHMARKS.md).
                 let keyed: Vec<(u64, usize)> = keys
                     .iter()
                     .enumerate()
@@ -256,8 +256,8 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        // Above the parallel sort's size; at 1e-7 m the indices (up to 5e6) do not pack and the
-        // tuples are sorted instead.
+        // Above the parallel sort's size; at 1e-7 m the spans (1e7, 3e6 and 1e6 voxels) need 66
+        // bits, do not pack, and the tuples are sorted instead.
         let cloud: Vec<Point3<f64>> = (0..3 * PARALLEL_SORT_POINTS)
             .map(|_| Point3::new(uniform(), uniform() * 0.3, uniform() * 0.1))
             .collect();
@@ -333,13 +333,9 @@ mod tests {
 
     #[test]
     fn the_radix_sort_orders_by_key_and_keeps_the_order_of_equal_keys() {
-        let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            state >> 30
-        };
+        let mut rng = crate::rng::SplitMix64::new(7);
+        // 34-bit keys, so that the narrower masks leave many equal.
+        let mut next = || rng.next_u64() >> 30;
         for key_bits in [0, 5, 11, 12, 33, 64] {
             let mask = if key_bits == 64 {
                 u64::MAX
