@@ -105,13 +105,15 @@ impl FacingTree {
             sum += normals[t as usize];
         }
         let axis = sum.try_normalize(1e-9).unwrap_or_else(Vector3::z);
+        // The widest normal's angle: acos is decreasing, so one acos of the smallest cosine.
         let half_angle_rad = if sum.norm() < 1e-9 {
             std::f64::consts::PI
         } else {
             members
                 .iter()
-                .map(|&t| axis.dot(&normals[t as usize]).clamp(-1.0, 1.0).acos())
-                .fold(0.0, f64::max)
+                .map(|&t| axis.dot(&normals[t as usize]).clamp(-1.0, 1.0))
+                .fold(1.0, f64::min)
+                .acos()
         };
         Node {
             lower,

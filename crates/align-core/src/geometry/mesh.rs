@@ -486,6 +486,13 @@ impl Mesh {
         Some(surface)
     }
 
+    /// Builds the tree the approximate and facing queries descend now rather than on the first
+    /// such query, so that a caller can build it on an idle core: a query that finds it being
+    /// built waits, and so does every other query of its parallel loop.
+    pub fn prepare_approximate_queries(&self) {
+        self.facing_tree();
+    }
+
     fn facing_tree(&self) -> &FacingTree {
         self.facing_tree.get_or_init(|| {
             let corners: Vec<[Vector3<f64>; 3]> = (0..self.trimesh.num_triangles() as u32)

@@ -435,6 +435,11 @@ fn locate(
     // drawn while the scan is binned, mostly serial work (docs/BENCHMARKS.md).
     let sample_part = || {
         if local {
+            // A run whose first band matches approximately (see `RunSlack`) needs the mesh's
+            // facing tree: built here, it costs the run nothing on two cores.
+            if options.wide_band_slack && local_schedule_from > LOCAL_EXACT_WITHIN_BAND_M {
+                mesh.prepare_approximate_queries();
+            }
             wide_band_samples(mesh, local_schedule_from, options)
         } else {
             Vec::new()
