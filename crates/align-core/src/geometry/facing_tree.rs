@@ -64,16 +64,7 @@ impl FacingTree {
     /// Builds the tree over `corners` (one triangle each) with their unit `normals`; `size_m`
     /// weighs normal spread against distance when choosing splits.
     pub fn new(corners: &[[Vector3<f64>; 3]], normals: &[Vector3<f64>], size_m: f64) -> Self {
-        let normal_weight = 0.25 * size_m.max(1e-9);
-        let keys: Vec<[f64; 6]> = corners
-            .iter()
-            .zip(normals)
-            .map(|(c, n)| {
-                let centroid = (c[0] + c[1] + c[2]) / 3.0;
-                let n = n * normal_weight;
-                [centroid.x, centroid.y, centroid.z, n.x, n.y, n.z]
-            })
-            .collect();
+        let keys = split_keys(corners, normals, size_m);
         let mut order: Vec<u32> = (0..corners.len() as u32).collect();
         if corners.is_empty() {
             return Self {
@@ -278,6 +269,25 @@ impl FacingTree {
             found
         })
     }
+}
+
+/// Each triangle's place for the splits: its centroid, and its normal scaled by a quarter of
+/// `size_m` (see the module's documentation).
+fn split_keys(
+    corners: &[[Vector3<f64>; 3]],
+    normals: &[Vector3<f64>],
+    size_m: f64,
+) -> Vec<[f64; 6]> {
+    let normal_weight = 0.25 * size_m.max(1e-9);
+    corners
+        .iter()
+        .zip(normals)
+        .map(|(c, n)| {
+            let centroid = (c[0] + c[1] + c[2]) / 3.0;
+            let n = n * normal_weight;
+            [centroid.x, centroid.y, centroid.z, n.x, n.y, n.z]
+        })
+        .collect()
 }
 
 /// A node's run of the tree's triangle order and, for an inner node, its first child's index.

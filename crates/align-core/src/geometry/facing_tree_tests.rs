@@ -1,6 +1,13 @@
 use super::*;
 use crate::rng::SplitMix64;
 
+fn unit_normals(corners: &[[Vector3<f64>; 3]]) -> Vec<Vector3<f64>> {
+    corners
+        .iter()
+        .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
+        .collect()
+}
+
 fn between(rng: &mut SplitMix64, low: f64, high: f64) -> f64 {
     low + (high - low) * rng.uniform()
 }
@@ -70,16 +77,7 @@ fn serial_build(
         split(first_child, left, keys, corners, normals, nodes, order);
         split(first_child + 1, right, keys, corners, normals, nodes, order);
     }
-    let normal_weight = 0.25 * size_m;
-    let keys: Vec<[f64; 6]> = corners
-        .iter()
-        .zip(normals)
-        .map(|(c, n)| {
-            let centroid = (c[0] + c[1] + c[2]) / 3.0;
-            let n = n * normal_weight;
-            [centroid.x, centroid.y, centroid.z, n.x, n.y, n.z]
-        })
-        .collect();
+    let keys = split_keys(corners, normals, size_m);
     let mut members: Vec<u32> = (0..corners.len() as u32).collect();
     let mut nodes = vec![bound_of(corners, normals, &members)];
     let mut order = Vec::new();
@@ -123,10 +121,7 @@ fn the_parallel_build_lays_out_the_serial_builds_tree() {
         random_triangles(5000, &mut rng),
         grid,
     ] {
-        let normals: Vec<Vector3<f64>> = corners
-            .iter()
-            .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
-            .collect();
+        let normals = unit_normals(&corners);
         let tree = FacingTree::new(&corners, &normals, 2.0);
         let (nodes, order) = serial_build(&corners, &normals, 2.0);
         let count = corners.len();
@@ -158,10 +153,7 @@ fn the_parallel_build_lays_out_the_serial_builds_tree() {
 fn the_tree_finds_what_a_scan_of_every_triangle_finds() {
     let mut rng = SplitMix64::new(7);
     let corners = random_triangles(500, &mut rng);
-    let normals: Vec<Vector3<f64>> = corners
-        .iter()
-        .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
-        .collect();
+    let normals = unit_normals(&corners);
     let tree = FacingTree::new(&corners, &normals, 2.0);
     for _ in 0..300 {
         let query = Point3::new(
@@ -208,10 +200,7 @@ fn the_tree_finds_what_a_scan_of_every_triangle_finds() {
 fn a_search_with_slack_stays_within_its_factor_and_facing() {
     let mut rng = SplitMix64::new(5);
     let corners = random_triangles(500, &mut rng);
-    let normals: Vec<Vector3<f64>> = corners
-        .iter()
-        .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
-        .collect();
+    let normals = unit_normals(&corners);
     let tree = FacingTree::new(&corners, &normals, 2.0);
     let mut inexact = 0;
     for _ in 0..500 {
@@ -240,10 +229,7 @@ const FRAC_PI_4_COS: f64 = std::f64::consts::FRAC_1_SQRT_2 - 1e-12;
 fn cached_queries_find_what_a_descent_finds() {
     let mut rng = SplitMix64::new(11);
     let corners = random_triangles(400, &mut rng);
-    let normals: Vec<Vector3<f64>> = corners
-        .iter()
-        .map(|[a, b, c]| (b - a).cross(&(c - a)).normalize())
-        .collect();
+    let normals = unit_normals(&corners);
     let tree = FacingTree::new(&corners, &normals, 2.0);
     let mut cache = NearbyTriangles::default();
     let mut query = Point3::new(0.3, -0.2, 0.4);
