@@ -62,8 +62,15 @@ pub(crate) struct FacingTree {
 
 impl FacingTree {
     /// Builds the tree over `corners` (one triangle each) with their unit `normals`; `size_m`
-    /// weighs normal spread against distance when choosing splits.
-    pub fn new(corners: &[[Vector3<f64>; 3]], normals: &[Vector3<f64>], size_m: f64) -> Self {
+    /// weighs normal spread against distance when choosing splits. `parallel`: on rayon's pool
+    /// (the same tree); only from where no job the pool might take up while waiting can need
+    /// this tree (see `Mesh::prepare_approximate_queries`).
+    pub fn new(
+        corners: &[[Vector3<f64>; 3]],
+        normals: &[Vector3<f64>],
+        size_m: f64,
+        parallel: bool,
+    ) -> Self {
         let keys = split_keys(corners, normals, size_m);
         let mut order: Vec<u32> = (0..corners.len() as u32).collect();
         if corners.is_empty() {
@@ -76,24 +83,29 @@ impl FacingTree {
             };
         }
         // The triangles' order first (each node's members are a contiguous run of it, halved
-        // at its median), then every node's bounds from its run: both on every core. A
-        // 30k-triangle link took 18 ms serially, on the critical path of a local alignment.
-        partition(&mut order, &keys);
+        // at its median), then every node's bounds from its run of the ordered triangles
+        // (contiguous in memory). A 26k-triangle link took 18 ms as the tree was built before,
+        // depth first with each node's bounds gathered by index, on a local alignment's
+        // critical path; 6 ms this way on two cores.
+        partition(&mut order, &keys, parallel);
         let corners: Vec<[Vector3<f64>; 3]> = order.iter().map(|&t| corners[t as usize]).collect();
         let normals: Vec<Vector3<f64>> = order.iter().map(|&t| normals[t as usize]).collect();
-        let nodes: Vec<Node> = node_runs(corners.len())
-            .par_iter()
-            .map(|run| {
-                let members = run.start as usize..(run.start + run.len) as usize;
-                let mut node = Self::bound(&corners[members.clone()], &normals[members]);
-                (node.first, node.count) = match run.first_child {
-                    Some(child) => (child, 0),
-                    // A leaf's triangles are stored in the tree's order: its slots are its run.
-                    None => (run.start, run.len),
-                };
-                node
-            })
-            .collect();
+        let node_of = |run: &NodeRun| {
+            let members = run.start as usize..(run.start + run.len) as usize;
+            let mut node = Self::bound(&corners[members.clone()], &normals[members]);
+            (node.first, node.count) = match run.first_child {
+                Some(child) => (child, 0),
+                // A leaf's triangles are stored in the tree's order: its slots are its run.
+                None => (run.start, run.len),
+            };
+            node
+        };
+        let runs = node_runs(corners.len());
+        let nodes: Vec<Node> = if parallel {
+            runs.par_iter().map(node_of).collect()
+        } else {
+            runs.iter().map(node_of).collect()
+        };
         let mut slot_of = vec![0; corners.len()];
         for (slot, &triangle) in order.iter().enumerate() {
             slot_of[triangle as usize] = slot as u32;
@@ -297,13 +309,13 @@ struct NodeRun {
     first_child: Option<u32>,
 }
 
-/// Runs of more triangles than this are halved on two cores.
+/// Runs of more triangles than this have their halves ordered in parallel.
 const PARALLEL_RUN: usize = 2048;
 
 /// Orders `members` so that every node's are contiguous: a run of more than [`LEAF_SIZE`] is
-/// split at its median along whichever of the six key coordinates (centroid, and normal scaled
-/// by half the part's size) spreads most, and each half ordered the same way.
-fn partition(members: &mut [u32], keys: &[[f64; 6]]) {
+/// split at its median along whichever of the six coordinates of [`split_keys`] spreads most,
+/// and each half ordered the same way (the halves of long runs in parallel if `parallel`).
+fn partition(members: &mut [u32], keys: &[[f64; 6]], parallel: bool) {
     if members.len() <= LEAF_SIZE {
         return;
     }
@@ -323,13 +335,16 @@ fn partition(members: &mut [u32], keys: &[[f64; 6]]) {
     members.select_nth_unstable_by(middle, |&a, &b| {
         keys[a as usize][dimension].total_cmp(&keys[b as usize][dimension])
     });
-    let parallel = members.len() > PARALLEL_RUN;
+    let in_parallel = parallel && members.len() > PARALLEL_RUN;
     let (left, right) = members.split_at_mut(middle);
-    if parallel {
-        rayon::join(|| partition(left, keys), || partition(right, keys));
+    if in_parallel {
+        rayon::join(
+            || partition(left, keys, parallel),
+            || partition(right, keys, parallel),
+        );
     } else {
-        partition(left, keys);
-        partition(right, keys);
+        partition(left, keys, parallel);
+        partition(right, keys, parallel);
     }
 }
 

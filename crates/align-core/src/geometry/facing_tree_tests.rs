@@ -93,11 +93,11 @@ fn serial_build(
     (nodes, order)
 }
 
-/// The build on two cores lays out the very tree the serial one did, on random triangles
-/// and on a grid whose centroids tie along every axis (where a median split could go
-/// either way), from one triangle to enough for the parallel halving.
+/// The build, on one core and on rayon's pool, lays out the very tree the serial depth-first
+/// one did, on random triangles and on a grid whose centroids tie along every axis (where a
+/// median split could go either way), from one triangle to enough for the parallel halving.
 #[test]
-fn the_parallel_build_lays_out_the_serial_builds_tree() {
+fn the_build_lays_out_the_serial_depth_first_builds_tree() {
     let mut rng = SplitMix64::new(5);
     let mut grid = Vec::new();
     for i in 0..60 {
@@ -122,29 +122,31 @@ fn the_parallel_build_lays_out_the_serial_builds_tree() {
         grid,
     ] {
         let normals = unit_normals(&corners);
-        let tree = FacingTree::new(&corners, &normals, 2.0);
         let (nodes, order) = serial_build(&corners, &normals, 2.0);
         let count = corners.len();
-        assert_eq!(tree.original, order, "{count} triangles");
-        assert_eq!(tree.nodes.len(), nodes.len(), "{count} triangles");
-        for (built, serial) in tree.nodes.iter().zip(&nodes) {
-            assert_eq!(
-                (built.lower, built.upper, built.first, built.count),
-                (serial.lower, serial.upper, serial.first, serial.count),
-                "{count} triangles"
-            );
-            // The serial build summed a node's normals before its children were ordered:
-            // the same sum in another order, equal to rounding. A cone only ever skips
-            // triangles that no query accepts, so the answers are the same.
-            assert!(
-                (built.axis - serial.axis).norm() < 1e-12,
-                "{count} triangles"
-            );
-            assert!((built.half_angle_rad - serial.half_angle_rad).abs() < 1e-12);
-        }
-        for (slot, &t) in order.iter().enumerate() {
-            assert_eq!(tree.corners[slot], corners[t as usize]);
-            assert_eq!(tree.slot_of[t as usize] as usize, slot);
+        for parallel in [false, true] {
+            let tree = FacingTree::new(&corners, &normals, 2.0, parallel);
+            assert_eq!(tree.original, order, "{count} triangles");
+            assert_eq!(tree.nodes.len(), nodes.len(), "{count} triangles");
+            for (built, serial) in tree.nodes.iter().zip(&nodes) {
+                assert_eq!(
+                    (built.lower, built.upper, built.first, built.count),
+                    (serial.lower, serial.upper, serial.first, serial.count),
+                    "{count} triangles"
+                );
+                // The serial build summed a node's normals before its children were ordered:
+                // the same sum in another order, equal to rounding. A cone only ever skips
+                // triangles that no query accepts, so the answers are the same.
+                assert!(
+                    (built.axis - serial.axis).norm() < 1e-12,
+                    "{count} triangles"
+                );
+                assert!((built.half_angle_rad - serial.half_angle_rad).abs() < 1e-12);
+            }
+            for (slot, &t) in order.iter().enumerate() {
+                assert_eq!(tree.corners[slot], corners[t as usize]);
+                assert_eq!(tree.slot_of[t as usize] as usize, slot);
+            }
         }
     }
 }
@@ -154,7 +156,7 @@ fn the_tree_finds_what_a_scan_of_every_triangle_finds() {
     let mut rng = SplitMix64::new(7);
     let corners = random_triangles(500, &mut rng);
     let normals = unit_normals(&corners);
-    let tree = FacingTree::new(&corners, &normals, 2.0);
+    let tree = FacingTree::new(&corners, &normals, 2.0, false);
     for _ in 0..300 {
         let query = Point3::new(
             between(&mut rng, -1.5, 1.5),
@@ -201,7 +203,7 @@ fn a_search_with_slack_stays_within_its_factor_and_facing() {
     let mut rng = SplitMix64::new(5);
     let corners = random_triangles(500, &mut rng);
     let normals = unit_normals(&corners);
-    let tree = FacingTree::new(&corners, &normals, 2.0);
+    let tree = FacingTree::new(&corners, &normals, 2.0, false);
     let mut inexact = 0;
     for _ in 0..500 {
         // Queries near and far (up to a few part sizes off).
@@ -230,7 +232,7 @@ fn cached_queries_find_what_a_descent_finds() {
     let mut rng = SplitMix64::new(11);
     let corners = random_triangles(400, &mut rng);
     let normals = unit_normals(&corners);
-    let tree = FacingTree::new(&corners, &normals, 2.0);
+    let tree = FacingTree::new(&corners, &normals, 2.0, false);
     let mut cache = NearbyTriangles::default();
     let mut query = Point3::new(0.3, -0.2, 0.4);
     let mut reused = 0;

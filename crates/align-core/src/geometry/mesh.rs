@@ -486,23 +486,35 @@ impl Mesh {
         Some(surface)
     }
 
-    /// Builds the tree the approximate and facing queries descend now rather than on the first
-    /// such query, so that a caller can build it on an idle core: a query that finds it being
-    /// built waits, and so does every other query of its parallel loop.
+    /// Builds the tree the approximate and facing queries descend now, on every core, rather
+    /// than on the first such query, so that a caller can build it on an idle core: a query
+    /// that finds it being built waits, and so does every other query of its parallel loop.
+    ///
+    /// The tree is built outside the cell that keeps it. Built inside, a thread waiting for
+    /// its share of the build could take up a query of the same mesh from the pool and wait
+    /// for the very cell it is filling. A query that comes first builds its own copy on one
+    /// core (the same tree) and keeps whichever was stored first.
     pub fn prepare_approximate_queries(&self) {
-        self.facing_tree();
+        if self.facing_tree.get().is_none() {
+            let _ = self.facing_tree.set(self.build_facing_tree(true));
+        }
     }
 
     fn facing_tree(&self) -> &FacingTree {
-        self.facing_tree.get_or_init(|| {
-            let corners: Vec<[Vector3<f64>; 3]> = (0..self.trimesh.num_triangles() as u32)
-                .map(|i| {
-                    let triangle = self.trimesh.triangle(i);
-                    [triangle.a, triangle.b, triangle.c].map(from_glam)
-                })
-                .collect();
-            FacingTree::new(&corners, &self.face_normals, self.size_m())
-        })
+        // One core: this runs inside the cell's initialisation, often from a parallel loop's
+        // query (see `prepare_approximate_queries`).
+        self.facing_tree
+            .get_or_init(|| self.build_facing_tree(false))
+    }
+
+    fn build_facing_tree(&self, parallel: bool) -> FacingTree {
+        let corners: Vec<[Vector3<f64>; 3]> = (0..self.trimesh.num_triangles() as u32)
+            .map(|i| {
+                let triangle = self.trimesh.triangle(i);
+                [triangle.a, triangle.b, triangle.c].map(from_glam)
+            })
+            .collect();
+        FacingTree::new(&corners, &self.face_normals, self.size_m(), parallel)
     }
 
     /// A projection onto `triangle` as a [`SurfacePoint`]: the pseudo-normal on edges and
