@@ -486,14 +486,14 @@ impl Mesh {
         Some(surface)
     }
 
-    /// Builds the tree the approximate and facing queries descend now, on every core, rather
-    /// than on the first such query, so that a caller can build it on an idle core: a query
-    /// that finds it being built waits, and so does every other query of its parallel loop.
+    /// Builds the tree the approximate and facing queries descend now, on rayon's pool, so
+    /// that a caller can build it while a core is idle. Left to the first such query, it is
+    /// built on one core inside that query's parallel loop, whose other queries wait for it.
     ///
     /// The tree is built outside the cell that keeps it. Built inside, a thread waiting for
     /// its share of the build could take up a query of the same mesh from the pool and wait
-    /// for the very cell it is filling. A query that comes first builds its own copy on one
-    /// core (the same tree) and keeps whichever was stored first.
+    /// for the very cell it is filling. A query that comes while this runs builds its own copy
+    /// on one core (the same tree); the copy stored first is kept.
     pub fn prepare_approximate_queries(&self) {
         if self.facing_tree.get().is_none() {
             let _ = self.facing_tree.set(self.build_facing_tree(true));
