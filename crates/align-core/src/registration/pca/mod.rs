@@ -433,11 +433,23 @@ fn locate(
     };
     // The part's samples for the wide bands depend on the part alone: on two cores they are
     // drawn while the scan is binned, mostly serial work (docs/BENCHMARKS.md).
+    // A local run (no exploration) from a wide band matches the outer half of the band
+    // approximately until the band has narrowed to 5 cm: exact, its queries far off the
+    // part were four fifths of a 1000 mm local alignment (see LOCAL_EXACT_WITHIN_BAND_M).
+    let local_slack = if local && options.wide_band_slack {
+        RunSlack {
+            factor: EXPLORATION_SLACK,
+            exact_within_band_m: LOCAL_EXACT_WITHIN_BAND_M,
+            exact_within_band_fraction: LOCAL_EXACT_WITHIN_BAND_FRACTION,
+        }
+    } else {
+        RunSlack::EXACT
+    };
     let sample_part = || {
         if local {
-            // A run whose first band matches approximately (see `RunSlack`) needs the mesh's
-            // facing tree: built here, it costs the run nothing on two cores.
-            if options.wide_band_slack && local_schedule_from > LOCAL_EXACT_WITHIN_BAND_M {
+            // A run whose first band matches approximately needs the mesh's facing tree:
+            // built here, it costs the run nothing on two cores.
+            if local_slack.at_band(local_schedule_from) > 1.0 {
                 mesh.prepare_approximate_queries();
             }
             wide_band_samples(mesh, local_schedule_from, options)
@@ -510,18 +522,6 @@ fn locate(
             delta: options.delta_min_m.min(delta0_m),
         }
     } else {
-        // A local run (no exploration) from a wide band matches the outer half of the band
-        // approximately until the band has narrowed to 5 cm: exact, its queries far off the
-        // part were four fifths of a 1000 mm local alignment (see LOCAL_EXACT_WITHIN_BAND_M).
-        let slack = if coarse.is_none() && options.wide_band_slack {
-            RunSlack {
-                factor: EXPLORATION_SLACK,
-                exact_within_band_m: LOCAL_EXACT_WITHIN_BAND_M,
-                exact_within_band_fraction: LOCAL_EXACT_WITHIN_BAND_FRACTION,
-            }
-        } else {
-            RunSlack::EXACT
-        };
         let model_to_scan = if coarse.is_none() {
             model_to_scan_levels(&levels, part_samples, options.parallel)
         } else {
@@ -555,7 +555,7 @@ fn locate(
             &start,
             schedule_from,
             options,
-            slack,
+            local_slack,
             &model_to_scan,
         )
     };

@@ -240,7 +240,7 @@ impl RunSlack {
         }
     }
 
-    fn at_band(&self, band_m: f64) -> f64 {
+    pub(super) fn at_band(&self, band_m: f64) -> f64 {
         if band_m > self.exact_within_band_m {
             self.factor
         } else {
