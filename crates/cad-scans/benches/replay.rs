@@ -17,7 +17,7 @@ use std::time::Instant;
 use align_core::geometry::Mesh;
 use align_core::io::{read_cloud, read_mesh};
 use align_core::registration::convergence::pose_distance;
-use align_core::registration::pca::align_cloud;
+use align_core::registration::pca::{align_cloud, scan_consensus};
 use align_core::trials::SUCCESS_THRESHOLD_M;
 use align_service::jobs::cloud::cloud_options;
 use cad_scans::files::{SceneFile, isometry_from_rows};
@@ -133,6 +133,7 @@ fn main() {
         let start = isometry_from_rows(&replayed.scene.start);
         let mut fastest_s = f64::INFINITY;
         let mut error_mm = f64::NAN;
+        let mut last = None;
         for _ in 0..args.runs {
             let clock = Instant::now();
             let result = align_cloud(
@@ -143,15 +144,26 @@ fn main() {
                 &options,
             );
             fastest_s = fastest_s.min(clock.elapsed().as_secs_f64());
-            error_mm = result.map_or(f64::NAN, |r| {
+            error_mm = result.as_ref().map_or(f64::NAN, |r| {
                 1e3 * pose_distance(
                     &r.alignment.base_from_part,
                     &replayed.truth,
                     replayed.mesh.radius_m(),
                 )
             });
+            last = result.ok();
         }
         let succeeded = error_mm < SUCCESS_THRESHOLD_M * 1e3;
+        // A miss's scores (after the clock): a truth that outscores the pose found is a pose
+        // the search never reached; one that scores alike is a scan the score cannot read.
+        let miss_scores = match (&last, succeeded) {
+            (Some(r), false) => Some(serde_json::json!({
+                "found": scan_consensus(&replayed.mesh, &replayed.cloud, &r.alignment.base_from_part, &options),
+                "truth": scan_consensus(&replayed.mesh, &replayed.cloud, &replayed.truth, &options),
+            })),
+            _ => None,
+        };
+        let uniqueness = last.as_ref().and_then(|r| r.uniqueness.as_ref());
         results.push((replayed.scene.delta_m * 1e3, succeeded, fastest_s));
         scenes.push(serde_json::json!({
             "id": replayed.scene.id,
@@ -160,6 +172,10 @@ fn main() {
             "error_mm": error_mm,
             "succeeded": succeeded,
             "time_s": fastest_s,
+            "refused": last.is_none(),
+            "ambiguous": uniqueness.is_some_and(|u| u.ambiguous),
+            "margin": uniqueness.map(|u| u.margin),
+            "miss_scores": miss_scores,
         }));
         if index % 10 == 9 || index + 1 == dirs.len() {
             eprint!("\rreplay: {}/{}", index + 1, dirs.len());

@@ -6,11 +6,14 @@
 //!   the ray, mixed pixels at depth edges, spurious returns);
 //! - [`scenes`]: the parts (shipped meshes, the ABB IRB 1600's from outside the repository) and
 //!   the seeded scenes: a part standing or lying on a floor beside a box, 2-3 scanners;
+//! - [`robot`]: a whole robot (its URDF's links posed by forward kinematics) scanned the same
+//!   way, for the robot fit's trials (`robot-scans`);
 //! - [`files`], [`trials`], [`peers`], [`table`]: the corpus written to files, ips and the peers
 //!   run on it, every pose scored by the thesis's pose distance, one table.
 
 pub mod files;
 pub mod peers;
+pub mod robot;
 pub mod scanner;
 pub mod scenes;
 pub mod table;

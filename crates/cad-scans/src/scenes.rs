@@ -216,6 +216,31 @@ pub fn make_scene(part: &Part, seed: u64, noise: &ScanNoise) -> Result<Scene, cr
             triangles: box_triangles,
         },
     ])?;
+    let (points, scanners, spacing_m) =
+        scan_around(&scene, &centre, radius_m, MAX_GRID_SIDE, noise, &mut rng);
+    Ok(Scene {
+        part: part.name.clone(),
+        posture,
+        world_from_part,
+        points,
+        scanners,
+        spacing_m,
+    })
+}
+
+/// Two or three scanners placed around `centre` (25-65 degrees above the floor, 0.8-1.6 m plus
+/// `radius_m` from it, 70-140 degrees apart), each aimed at the centre with a view of the radius
+/// plus 25 cm and a ray spacing at the centre of 3-10 mm (drawn per scanner; a grid side capped
+/// at `max_grid_side` may push it up, never above 10 mm): every point they return, the
+/// scanners, and the spacing each was set up for.
+pub(crate) fn scan_around(
+    scene: &SceneMesh,
+    centre: &Point3<f64>,
+    radius_m: f64,
+    max_grid_side: usize,
+    noise: &ScanNoise,
+    rng: &mut SplitMix64,
+) -> (Vec<ScanPoint>, Vec<Scanner>, Vec<f64>) {
     let count = if rng.uniform() < 0.5 { 2 } else { 3 };
     let mut azimuth = rng.uniform() * std::f64::consts::TAU;
     let (mut points, mut scanners, mut spacing_m) = (Vec::new(), Vec::new(), Vec::new());
@@ -233,22 +258,15 @@ pub fn make_scene(part: &Part, seed: u64, noise: &ScanNoise) -> Result<Scene, cr
         // Enough of the view to take in the floor and the box around the part.
         let half_angle_rad = ((radius_m + 0.25) / distance_m).atan();
         let wanted_m = SPACING_RANGE_M.0 + (SPACING_RANGE_M.1 - SPACING_RANGE_M.0) * rng.uniform();
-        let capped_m = 2.0 * half_angle_rad * distance_m / (MAX_GRID_SIDE - 1) as f64;
+        let capped_m = 2.0 * half_angle_rad * distance_m / (max_grid_side - 1) as f64;
         let spacing = wanted_m.max(capped_m).min(SPACING_RANGE_M.1);
         let scanner = Scanner::aimed(origin, aim, half_angle_rad, spacing / distance_m, 10.0);
-        points.extend(scan(&scene, &scanner, noise, &mut rng));
+        points.extend(scan(scene, &scanner, noise, rng));
         scanners.push(scanner);
         spacing_m.push(spacing);
         azimuth += (70.0 + 70.0 * rng.uniform()).to_radians();
     }
-    Ok(Scene {
-        part: part.name.clone(),
-        posture,
-        world_from_part,
-        points,
-        scanners,
-        spacing_m,
-    })
+    (points, scanners, spacing_m)
 }
 
 /// The part turned to its posture, spun about the vertical and set down on z = 0 near the
@@ -281,7 +299,7 @@ fn place_on_floor(part: &Part, posture: Posture, rng: &mut SplitMix64) -> Isomet
     Isometry3::from_parts(Translation3::from(shift), rotation)
 }
 
-fn bounds_centre(points: &[Point3<f64>]) -> Point3<f64> {
+pub(crate) fn bounds_centre(points: &[Point3<f64>]) -> Point3<f64> {
     let mut low = Point3::from(Vector3::repeat(f64::INFINITY));
     let mut high = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
     for p in points {
@@ -292,7 +310,7 @@ fn bounds_centre(points: &[Point3<f64>]) -> Point3<f64> {
 }
 
 /// A box 8-30 cm a side on the floor beside the part, clear of its footprint.
-fn clutter_box(
+pub(crate) fn clutter_box(
     centre: &Point3<f64>,
     footprint_m: f64,
     rng: &mut SplitMix64,
@@ -316,7 +334,7 @@ fn clutter_box(
 }
 
 /// A square floor of `side_m` at z = 0 under the part.
-fn floor(centre: &Point3<f64>, side_m: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>) {
+pub(crate) fn floor(centre: &Point3<f64>, side_m: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>) {
     let h = side_m / 2.0;
     let corners = [(-h, -h), (h, -h), (h, h), (-h, h)]
         .map(|(x, y)| Point3::new(centre.x + x, centre.y + y, 0.0));

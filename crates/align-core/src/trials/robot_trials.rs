@@ -156,6 +156,16 @@ pub struct RobotScene {
     pub scan: RobotScanOptions,
 }
 
+/// A robot's true placement and a cloud of it, from any scanner: [`run_robot_trials_on_cloud`]
+/// aligns to clouds this crate did not make (crates/cad-scans ray-casts them).
+#[derive(Debug, Clone, Copy)]
+pub struct ScannedRobot<'a> {
+    pub world_from_root: Isometry3<f64>,
+    /// The joint values the robot was scanned at.
+    pub q: &'a [f64],
+    pub cloud: &'a [Point3<f64>],
+}
+
 /// Mixed into the seed of the independent method's stream.
 const INDEPENDENT_STREAM: u64 = 0x1D3E_7A11_0000_0001;
 
@@ -163,18 +173,17 @@ const INDEPENDENT_STREAM: u64 = 0x1D3E_7A11_0000_0001;
 /// link), then one per link of `links`.
 fn hierarchical_trial(
     body: &ArticulatedBody,
-    scene: &RobotScene,
-    cloud: &[Point3<f64>],
+    scanned: &ScannedRobot,
     poses: &[Isometry3<f64>],
     links: &[usize],
     delta_m: f64,
     rng: &mut TrialRng,
 ) -> Vec<Outcome> {
-    let (base, q0) = perturb_robot(body, &scene.world_from_root, &scene.q, delta_m, rng);
+    let (base, q0) = perturb_robot(body, &scanned.world_from_root, scanned.q, delta_m, rng);
     let started = Instant::now();
     let fit = align_robot(
         body,
-        cloud,
+        scanned.cloud,
         &base,
         &q0,
         delta_m,
@@ -307,10 +316,8 @@ fn finite_or_delta(error_m: f64, delta_m: f64) -> f64 {
 
 /// Runs the seeded trials `trials` (indices into each delta's sequence; the starts of the trials
 /// before `trials.start` are drawn and skipped, so a long run can be split and a failed trial
-/// reproduced alone) per delta: the hierarchical fit of the robot from a perturbed start and the
-/// rigid alignment of the whole robot and of each link from the thesis's displacement, as
-/// `methods` asks. Links are those with geometry. Each method draws from its own seeded stream,
-/// so a method's figures are the same whether or not the other one runs.
+/// reproduced alone) per delta on the scene's cloud ([`scan_robot`]): see
+/// [`run_robot_trials_on_cloud`].
 pub fn run_robot_trials(
     body: &ArticulatedBody,
     scene: &RobotScene,
@@ -318,18 +325,41 @@ pub fn run_robot_trials(
     trials: Range<usize>,
     seed: u64,
     methods: Methods,
-    mut on_trial: impl FnMut(f64, usize),
+    on_trial: impl FnMut(f64, usize),
 ) -> Vec<RobotTrialRow> {
     let cloud = scan_robot(body, &scene.world_from_root, &scene.q, &scene.scan);
-    let poses = body.link_poses(&scene.world_from_root, &scene.q);
+    let scanned = ScannedRobot {
+        world_from_root: scene.world_from_root,
+        q: &scene.q,
+        cloud: &cloud,
+    };
+    run_robot_trials_on_cloud(body, &scanned, deltas_m, trials, seed, methods, on_trial)
+}
+
+/// The trials of [`run_robot_trials`] on a cloud made elsewhere: per delta, the hierarchical
+/// fit of the robot from a perturbed start and the rigid alignment of the whole robot and of
+/// each link from the thesis's displacement, as `methods` asks. Links are those with geometry.
+/// Each method draws from its own seeded stream, so a method's figures are the same whether or
+/// not the other one runs.
+pub fn run_robot_trials_on_cloud(
+    body: &ArticulatedBody,
+    scanned: &ScannedRobot,
+    deltas_m: &[f64],
+    trials: Range<usize>,
+    seed: u64,
+    methods: Methods,
+    mut on_trial: impl FnMut(f64, usize),
+) -> Vec<RobotTrialRow> {
+    let cloud = scanned.cloud;
+    let poses = body.link_poses(&scanned.world_from_root, scanned.q);
     let links: Vec<usize> = (0..body.links().len())
         .filter(|&l| body.links()[l].surface.is_some())
         .collect();
-    let whole = body.rigid_mesh(&scene.q);
+    let whole = body.rigid_mesh(scanned.q);
     // The independent method's objects: the whole robot (when it has geometry), then each link.
     let objects: Vec<(&Mesh, Isometry3<f64>)> = whole
         .iter()
-        .map(|mesh| (mesh, scene.world_from_root))
+        .map(|mesh| (mesh, scanned.world_from_root))
         .chain(links.iter().map(|&link| {
             (
                 body.links()[link].surface.as_ref().expect("has surface"),
@@ -343,7 +373,7 @@ pub fn run_robot_trials(
         let mut rng = TrialRng::new(seed ^ delta_m.to_bits());
         let mut rigid_rng = TrialRng::new(seed ^ delta_m.to_bits() ^ INDEPENDENT_STREAM);
         for _ in 0..trials.start {
-            perturb_robot(body, &scene.world_from_root, &scene.q, delta_m, &mut rng);
+            perturb_robot(body, &scanned.world_from_root, scanned.q, delta_m, &mut rng);
             for (mesh, _) in &objects {
                 random_displacement(&mut rigid_rng, delta_m, mesh.radius_m());
             }
@@ -355,7 +385,7 @@ pub fn run_robot_trials(
         for trial in trials.clone() {
             on_trial(delta_m, trial);
             if methods.hierarchical {
-                hierarchical_trial(body, scene, &cloud, &poses, &links, delta_m, &mut rng)
+                hierarchical_trial(body, scanned, &poses, &links, delta_m, &mut rng)
                     .into_iter()
                     .zip(hierarchical.iter_mut())
                     .for_each(|(outcome, slot)| slot.push((trial, outcome)));
@@ -367,7 +397,7 @@ pub fn run_robot_trials(
                 let displacement = random_displacement(&mut rigid_rng, delta_m, mesh.radius_m());
                 let start = super::displace_about_centroid(truth, mesh, &displacement);
                 let started = Instant::now();
-                let result = align_cloud(mesh, &cloud, &start, delta_m, &pca_options);
+                let result = align_cloud(mesh, cloud, &start, delta_m, &pca_options);
                 let time_s = started.elapsed().as_secs_f64();
                 let error_m = result.map_or(delta_m, |r| {
                     surface_deviation_m(mesh, &r.alignment.base_from_part, truth)
