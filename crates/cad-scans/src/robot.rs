@@ -7,7 +7,10 @@
 
 use align_core::registration::articulated::ArticulatedBody;
 use align_core::rng::SplitMix64;
-use nalgebra::{Isometry3, Point3};
+use align_core::trials::robot_trials::{
+    Methods, RobotTrialRow, ScannedRobot, run_robot_trials_on_cloud,
+};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 
 use crate::scanner::{Origin, ScanNoise, ScanPoint, Scanner, SceneMesh, SceneObject, Surface};
 use crate::scenes::{bounds_centre, clutter_box, floor, scan_around};
@@ -180,6 +183,63 @@ pub fn scan_robot_raycast(
     })
 }
 
+/// Scene `scene` of a run seeded `seed`: the robot's root at (0.2, -0.1, 0) as the project's
+/// robot trials put it, turned 0.4 rad in scene 0 and a seeded turn in the others, its joints
+/// drawn about `home` ([`scene_joints`]), scanned from the scene's seeded scanners.
+pub fn seeded_scene(
+    body: &ArticulatedBody,
+    home: &[f64],
+    spread_rad: f64,
+    seed: u64,
+    scene: usize,
+    noise: &ScanNoise,
+) -> Result<RobotScene, RobotSceneError> {
+    let yaw = if scene == 0 {
+        0.4
+    } else {
+        SplitMix64::new(seed ^ (scene as u64).wrapping_mul(0x9E37)).uniform()
+            * std::f64::consts::TAU
+    };
+    let world_from_root = Isometry3::from_parts(
+        Translation3::new(0.2, -0.1, 0.0),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+    );
+    let q = scene_joints(body, &world_from_root, home, spread_rad, scene as u64);
+    let scan_seed = seed ^ (scene as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407);
+    scan_robot_raycast(body, &world_from_root, &q, scan_seed, noise)
+}
+
+/// The hierarchical fit's trials (`trials` of each delta's seeded sequence) on scene `scene` of
+/// a run seeded `seed` ([`seeded_scene`]), as `align_core`'s robot trials run them on their own
+/// scans: the base displaced by the thesis's scheme and every joint moved too.
+pub fn scene_trials(
+    body: &ArticulatedBody,
+    scanned: &RobotScene,
+    deltas_m: &[f64],
+    trials: std::ops::Range<usize>,
+    seed: u64,
+    scene: usize,
+    on_trial: impl FnMut(f64, usize),
+) -> Vec<RobotTrialRow> {
+    let cloud = scanned.cloud();
+    run_robot_trials_on_cloud(
+        body,
+        &ScannedRobot {
+            world_from_root: scanned.world_from_root,
+            q: &scanned.q,
+            cloud: &cloud,
+        },
+        deltas_m,
+        trials,
+        seed ^ scene as u64,
+        Methods {
+            independent: false,
+            hierarchical: true,
+        },
+        on_trial,
+    )
+}
+
 /// One link's (or the whole robot's) trials at one delta, over every scene.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RobotCell {
@@ -199,11 +259,7 @@ pub struct RobotCell {
 
 /// Adds one scene's rows (`align_core`'s tallies, trials numbered within the scene) to the
 /// cells, one per object and delta in the order first seen.
-pub fn add_scene_rows(
-    cells: &mut Vec<RobotCell>,
-    scene: usize,
-    rows: &[align_core::trials::robot_trials::RobotTrialRow],
-) {
+pub fn add_scene_rows(cells: &mut Vec<RobotCell>, scene: usize, rows: &[RobotTrialRow]) {
     for row in rows {
         let Some(tally) = &row.hierarchical else {
             continue;
@@ -313,4 +369,60 @@ pub fn robot_markdown(cells: &[RobotCell]) -> String {
         text += &failures.concat();
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use align_core::robots::ShippedRobot;
+
+    fn ur10() -> (ArticulatedBody, Vec<f64>) {
+        let robot = ShippedRobot::from_name("ur10").expect("shipped");
+        let body = ArticulatedBody::from_model(&robot.model().expect("model")).expect("body");
+        (body, robot.home())
+    }
+
+    fn root() -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::new(0.2, -0.1, 0.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
+        )
+    }
+
+    #[test]
+    fn scene_poses_stay_within_limits_and_off_the_floor_and_scene_0_is_home() {
+        let (body, home) = ur10();
+        assert_eq!(scene_joints(&body, &root(), &home, 0.5, 0), home);
+        for seed in 1..8 {
+            let q = scene_joints(&body, &root(), &home, 0.5, seed);
+            assert_ne!(q, home, "scene {seed} moves the joints");
+            for ((value, start), parameter) in q.iter().zip(&home).zip(body.parameters()) {
+                assert!((parameter.lower..=parameter.upper).contains(value));
+                assert!((value - start).abs() <= 0.5 + 1e-12);
+            }
+            assert!(lowest_above_root_m(&body, &root(), &q) > FLOOR_CLEARANCE_M);
+        }
+    }
+
+    #[test]
+    fn a_robot_scan_holds_the_robot_the_floor_and_the_scanners_artefacts() {
+        let (body, home) = ur10();
+        let scene =
+            scan_robot_raycast(&body, &root(), &home, 7, &ScanNoise::default()).expect("a scene");
+        let part = scene.count(Origin::Surface(Surface::Part));
+        let floor = scene.count(Origin::Surface(Surface::Floor));
+        let outliers = scene.count(Origin::Outlier);
+        assert!(part > 2_000, "{part} points on the robot");
+        assert!(floor > part, "{floor} on the floor");
+        assert!(scene.count(Origin::MixedPixel) > 0);
+        let fraction =
+            (outliers + scene.count(Origin::MixedPixel)) as f64 / scene.points.len() as f64;
+        assert!((fraction - 0.1).abs() < 0.01, "{fraction}");
+        assert!(scene.spacing_m.iter().all(|s| (0.003..=0.010).contains(s)));
+        let wrong = scan_robot_raycast(&body, &root(), &home[..3], 7, &ScanNoise::default());
+        assert!(matches!(
+            wrong,
+            Err(RobotSceneError::JointCount { values: 3, .. })
+        ));
+    }
 }

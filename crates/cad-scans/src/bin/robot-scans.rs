@@ -7,14 +7,10 @@ use std::process::ExitCode;
 use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::registration::articulated::ArticulatedBody;
 use align_core::robots::ShippedRobot;
-use align_core::trials::robot_trials::{Methods, ScannedRobot, run_robot_trials_on_cloud};
 use cad_scans::files::write_ply;
-use cad_scans::robot::{
-    RobotCell, add_scene_rows, robot_markdown, scan_robot_raycast, scene_joints,
-};
+use cad_scans::robot::{RobotCell, add_scene_rows, robot_markdown, scene_trials, seeded_scene};
 use cad_scans::scanner::{Origin, ScanNoise};
 use clap::Parser;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 /// The ABB IRB 1600's URDF when neither --robot nor --urdf is given (relative to the working
 /// directory: a checkout's root, beside the workplace's shared data).
@@ -167,21 +163,6 @@ fn load_robot(args: &Args) -> Result<(ArticulatedBody, Vec<f64>), String> {
     Ok((body, home))
 }
 
-/// Scene `scene`'s root: at (0.2, -0.1, 0) as the project's robot trials put it, turned 0.4 rad
-/// in scene 0 and a seeded turn in the others.
-fn root_pose(seed: u64, scene: usize) -> Isometry3<f64> {
-    let yaw = if scene == 0 {
-        0.4
-    } else {
-        let mut rng = align_core::rng::SplitMix64::new(seed ^ (scene as u64).wrapping_mul(0x9E37));
-        rng.uniform() * std::f64::consts::TAU
-    };
-    Isometry3::from_parts(
-        Translation3::new(0.2, -0.1, 0.0),
-        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
-    )
-}
-
 fn run(args: &Args) -> Result<String, String> {
     if args.trials == 0 || args.scenes == 0 {
         return Err("--trials and --scenes must be at least 1".to_owned());
@@ -217,17 +198,9 @@ fn run(args: &Args) -> Result<String, String> {
     let mut cells: Vec<RobotCell> = Vec::new();
     let mut scene_records = Vec::new();
     for &scene in &scenes {
-        let world_from_root = root_pose(args.seed, scene);
-        let scene_seed = args.seed ^ (scene as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407);
-        let q = scene_joints(
-            &body,
-            &world_from_root,
-            &home,
-            args.spread_rad,
-            scene as u64,
-        );
-        let scanned = scan_robot_raycast(&body, &world_from_root, &q, scene_seed, &noise)
+        let scanned = seeded_scene(&body, &home, args.spread_rad, args.seed, scene, &noise)
             .map_err(|e| e.to_string())?;
+        let (world_from_root, q) = (scanned.world_from_root, scanned.q.clone());
         let cloud = scanned.cloud();
         eprintln!(
             "robot-scans: {} scene {scene}: joints {:?}, {} points ({} on the robot, {} mixed pixels, {} outliers), spacing {:?} mm",
@@ -259,20 +232,13 @@ fn run(args: &Args) -> Result<String, String> {
             std::fs::write(&path, truth.to_string())
                 .map_err(|e| format!("'{}': {e}", path.display()))?;
         }
-        let rows = run_robot_trials_on_cloud(
+        let rows = scene_trials(
             &body,
-            &ScannedRobot {
-                world_from_root,
-                q: &q,
-                cloud: &cloud,
-            },
+            &scanned,
             &deltas_m,
             args.first_trial..args.first_trial + args.trials,
-            args.seed ^ scene as u64,
-            Methods {
-                independent: false,
-                hierarchical: true,
-            },
+            args.seed,
+            scene,
             |delta_m, trial| {
                 eprintln!(
                     "robot-scans: scene {scene}, delta {:.0} mm, trial {trial}",

@@ -1,6 +1,9 @@
 //! Hierarchical alignment of a robot in a scan (thesis 3.5, proposed there, built here): the base
 //! pose and the joint values, each link constrained by its parent.
 //!
+//! 0. The scan's isolated returns are left out (`isolated_min_neighbours`): a point whose
+//!    keypoint voxel has fewer than three occupied voxels within two of it, as a scanner's
+//!    spurious returns along its rays and the mixed pixels streaked across a depth gap are.
 //! 1. Base hypotheses: the whole robot at the start joints aligned as one rigid part with Point
 //!    Cloud Alignment (its filters, weights, schedule and exploration); and, when delta exceeds
 //!    three quarters of the proximal links' radius, the best few rigid alignments of the
@@ -37,6 +40,10 @@
 //!    where it differs, and the half turns tried again when the look moved a joint. The
 //!    half-turn states that were not kept give the `twin`, refined the same way before it is
 //!    called ambiguous.
+//! 6. The joints of the small links at the end of the chain (at most 1500 fine keypoints near
+//!    them: a wrist and its flange) are swept densely in a narrow band (`distal_sweep`), and
+//!    everything is refined once more in a band of `polish_band_m` (5 mm), which the mixed
+//!    pixels beside a small link's silhouette mostly miss.
 //!
 //! When delta is at most 0.18 of the robot's radius (at the start joints) the start is near:
 //! the searches from it settle every joint in its basin, so the beam keeps `near_beam_width`
@@ -68,6 +75,7 @@ mod beam;
 mod checks;
 mod context;
 mod contrast;
+mod distal;
 mod global_search;
 mod joint_search;
 mod options;
@@ -85,7 +93,7 @@ use nalgebra::{Isometry3, Point3};
 use super::body::ArticulatedBody;
 use crate::geometry::Mesh;
 use crate::registration::pca::{PcaError, PcaOptions, align_cloud_pose};
-use crate::registration::sampling::voxel_representatives;
+use crate::registration::sampling::{voxel_representatives, without_isolated};
 use base::round_base_axis;
 use context::{FitContext, Keypoints};
 use refine::refine;
@@ -201,6 +209,14 @@ pub fn align_robot(
     if near.is_empty() {
         return Err(RobotFitError::NothingInReach { reach_m: reach });
     }
+    // A scan too sparse for the voxel (most points isolated) is kept whole: its strays cannot
+    // be told from its surfaces that way.
+    let crowded = without_isolated(&near, options.voxel_m, options.isolated_min_neighbours);
+    let near = if 2 * crowded.len() >= near.len() {
+        crowded
+    } else {
+        near
+    };
     let (keypoints, coarse) = rayon::join(
         || voxel_representatives(&near, options.voxel_m),
         || voxel_representatives(&near, options.voxel_m * 3.0),
@@ -326,6 +342,30 @@ pub fn align_robot(
                 state = flipped;
             }
         }
+    }
+    // The small links at the end of the chain, swept densely in a narrow band: the searches and
+    // refinements before leave them within their wide bands (`distal`).
+    if start_mesh.is_some() && options.distal_sweep {
+        iterations += fit.distal_sweep(&mut world_from_root, &mut q, &mut state);
+    }
+    // Last, every link in a band a few noise widths wide: the mixed pixels a scanner leaves
+    // beside silhouettes lie within the last band (a centimetre), and on a wrist of 60-120
+    // keypoints they pulled joint 5 0.02 rad off (crates/cad-scans, `robot-scans`).
+    if options.polish_band_m > 0.0 {
+        let polish = RobotFitOptions {
+            band_min_m: options.polish_band_m,
+            ..options.clone()
+        };
+        iterations += refine(
+            body,
+            &keypoints,
+            &mut world_from_root,
+            &mut q,
+            options.polish_band_m,
+            &polish,
+            true,
+        );
+        state = final_state(body, &keypoints, &world_from_root, &q, options);
     }
     let report::FinalState {
         matches,

@@ -34,6 +34,19 @@ pub struct RobotFitOptions {
     /// 1600 at 1000 mm the pose nearest the truth ranked 6th to 29th in the four trials of 50
     /// that fewer lost (14 and 16 with 4 poses, 17 and 21 with 12; docs/articulated-trials.md).
     pub detected_bases: usize,
+    /// Scan points whose voxel (`voxel_m`) has fewer occupied voxels than this within two
+    /// voxels of it are left out before anything else ([`without_isolated`]: a scanner's
+    /// spurious returns and mixed pixels); 0 keeps every point.
+    ///
+    /// [`without_isolated`]: crate::registration::sampling::without_isolated
+    pub isolated_min_neighbours: usize,
+    /// Sweep the joints of the small links at the end of the chain (a wrist and its flange)
+    /// densely in a narrow band after the last refinement (`FitContext::distal_sweep`).
+    pub distal_sweep: bool,
+    /// The band of one more exact refinement after everything else, m (0: none): a few times
+    /// the scan's noise, so that the mixed pixels beside a small link's silhouette no longer
+    /// pull it.
+    pub polish_band_m: f64,
     pub max_iterations: usize,
     /// The refinement stops when a step moves the points along their normals by less than this
     /// (RMS), m.
@@ -65,6 +78,9 @@ impl Default for RobotFitOptions {
             near_search_passes: 1,
             base_candidates: 4,
             detected_bases: 40,
+            isolated_min_neighbours: 3,
+            distal_sweep: true,
+            polish_band_m: 0.005,
             // The last refinement starts within the narrow band and takes a handful when the
             // correspondences settle; should they cycle (points switching between links at the
             // 0.1 mm level), it keeps the best of 25.
@@ -86,7 +102,10 @@ impl Default for RobotFitOptions {
                 wide_exploration: false,
                 // Bringing the base near is all this stage is for; the joint refinement ends it.
                 polish: false,
-                without_large_planes: false,
+                // A ray-cast scan's floor reaches metres around the robot: with it, 5 of 50
+                // fits at 200 mm lost the base 0.1-0.4 m off when the isolated returns were
+                // kept too (crates/cad-scans, `robot-scans`; docs/articulated-trials.md).
+                without_large_planes: true,
                 // The fit's half-turn check and second look tell the robot's twins apart; the
                 // runs about the found pose were a third of a 100 mm fit's rigid stage
                 // (docs/BENCHMARKS.md) and changed no fit of the bench's 40.

@@ -1,0 +1,99 @@
+//! The hierarchical robot fit on whole robots in ray-cast scans (`robot-scans`): the shipped
+//! UR10 always, the ABB IRB 1600 where its support package is (the repository does not ship
+//! it: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder).
+
+use align_core::kinematics::{PackageMap, RobotModel};
+use align_core::registration::articulated::ArticulatedBody;
+use align_core::robots::ShippedRobot;
+use cad_scans::robot::{scene_trials, seeded_scene};
+use cad_scans::scanner::ScanNoise;
+
+/// `robot-scans`'s defaults: seed 20, joints drawn up to 0.5 rad about home.
+const SEED: u64 = 20;
+const SPREAD_RAD: f64 = 0.5;
+
+/// Runs `trials` of scene `scene` at `delta_m` and asserts that no link failed (a flange's
+/// spin the fit reports unseen is counted apart, as `reported`).
+fn no_link_fails(
+    body: &ArticulatedBody,
+    home: &[f64],
+    scene: usize,
+    delta_m: f64,
+    trials: &[usize],
+) {
+    let scanned = seeded_scene(body, home, SPREAD_RAD, SEED, scene, &ScanNoise::default())
+        .expect("the scene scans");
+    for &trial in trials {
+        let rows = scene_trials(
+            body,
+            &scanned,
+            &[delta_m],
+            trial..trial + 1,
+            SEED,
+            scene,
+            |_, _| {},
+        );
+        for row in &rows {
+            let tally = row.hierarchical.as_ref().expect("ran");
+            assert_eq!(
+                tally.failed,
+                0,
+                "scene {scene}, trial {trial} at {} mm, {}: {tally:?}",
+                delta_m * 1e3,
+                row.object
+            );
+        }
+    }
+}
+
+fn abb_irb1600() -> Option<ArticulatedBody> {
+    let dir = std::env::var_os("ABB_IRB1600_SUPPORT_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../../shared/data/abb_irb1600/abb_irb1600_support")
+        });
+    let urdf = dir.join("urdf/irb1600_6_12.urdf");
+    if !urdf.is_file() {
+        eprintln!(
+            "skipped: the ABB IRB 1600 support package is not here (ABB_IRB1600_SUPPORT_DIR)"
+        );
+        return None;
+    }
+    let mut packages = PackageMap::new();
+    packages.insert("abb_irb1600_support".to_owned(), dir);
+    let model = RobotModel::from_urdf_file(&urdf, &packages).expect("the ABB URDF loads");
+    Some(ArticulatedBody::from_model(&model).expect("the ABB has surfaces"))
+}
+
+/// The ABB's joints as its trials scan it (`robot-scans`'s default home).
+const ABB_HOME: [f64; 6] = [0.0, 0.3, -0.2, 0.0, 0.6, 0.0];
+
+#[test]
+fn the_ur10_in_a_ray_cast_scan_is_fitted_within_a_millimetre_on_every_link() {
+    let robot = ShippedRobot::Ur10;
+    let body = ArticulatedBody::from_model(&robot.model().expect("shipped")).expect("surfaces");
+    no_link_fails(&body, &robot.home(), 1, 0.05, &[0, 1, 2]);
+}
+
+/// In scene 0 at 50 mm, trials 0 and 4 left joint 5 0.2-1.1 rad off (link_5 11-12 mm) before
+/// the sweep of the wrist in a narrow band and the isolated returns' removal: the searches and
+/// refinements kept the flange's 15-40 keypoints inside their centimetre bands.
+#[test]
+fn the_abb_wrists_left_off_in_ray_cast_scans_are_found() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails(&body, &ABB_HOME, 0, 0.05, &[0, 4]);
+}
+
+/// In scene 2 at 200 mm, trial 1 put the base 0.44 m off, on the floor and the spurious
+/// returns, before the isolated returns were left out and the base stage's rigid run left out
+/// the floor.
+#[test]
+fn the_abb_base_lost_in_a_ray_cast_scan_at_200_mm_is_found() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails(&body, &ABB_HOME, 2, 0.2, &[1]);
+}
