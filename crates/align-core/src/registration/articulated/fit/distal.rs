@@ -21,18 +21,24 @@ use super::tree::{Window, search_order};
 /// into place, and sweeping it would cost a fit's time.
 const SWEPT_POINTS_MAX: usize = 1500;
 
+/// A joint is swept only when its links reach at most this far from its axis, m: a wrist's
+/// (the ABB IRB 1600's joint 5 0.11 m, its flange 0.07 m), not a forearm's, whose links hold
+/// points enough for the refinement and whose sweep costs a fit's time.
+const SWEPT_REACH_MAX_M: f64 = 0.15;
+
 /// The sweep's window is that of a search from a start this far off (its links' farthest point
 /// moved by up to twice this each way), m: more than the bands the searches and refinements
 /// leave a small link in.
 const SWEEP_M: f64 = 0.025;
 
 impl FitContext<'_> {
-    /// Sweeps each revolute joint whose links hold few fine keypoints ([`SWEPT_POINTS_MAX`])
-    /// over twice [`SWEEP_M`] each way at its farthest point, in steps that move that point by half the
-    /// narrow band (half a keypoint voxel), scoring fine keypoints within the band of the
-    /// links it moves that no other link explains. The best value, when it scores above the
-    /// state by more than the count's noise (2 sqrt), is refined and kept when it still explains
-    /// more where the two differ ([`FitContext::contrast_among`]). Returns the iterations spent.
+    /// Sweeps each revolute joint whose links reach at most [`SWEPT_REACH_MAX_M`] from its axis
+    /// and hold few fine keypoints ([`SWEPT_POINTS_MAX`]) over twice [`SWEEP_M`] each way at
+    /// its farthest point, in steps that move that point by the narrow band (half a keypoint
+    /// voxel), scoring fine keypoints within the band of the links it moves that no other link
+    /// explains. The middle of the best-scoring run of values, when it scores above the state
+    /// by [`sweep_gain_needed`], is refined and kept when it still explains that much more
+    /// where the two differ ([`FitContext::contrast_among`]). Returns the iterations spent.
     pub(super) fn distal_sweep(
         &self,
         world_from_root: &mut Isometry3<f64>,
@@ -56,6 +62,9 @@ impl FitContext<'_> {
             else {
                 continue;
             };
+            if window.reach_m > SWEPT_REACH_MAX_M {
+                continue;
+            }
             let moved: Vec<usize> = body
                 .moved_by(parameter)
                 .into_iter()
@@ -87,7 +96,7 @@ impl FitContext<'_> {
                     .sum()
             };
             let current = q[parameter];
-            let step = 0.5 * band / window.reach_m;
+            let step = band / window.reach_m;
             let steps = ((2.0 * window.half / step).ceil() as usize).max(2);
             let values = window.grid(body, current, window.half, steps);
             let scores: Vec<i64> = if options.parallel {

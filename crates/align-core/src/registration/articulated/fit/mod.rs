@@ -40,8 +40,8 @@
 //!    where it differs, and the half turns tried again when the look moved a joint. The
 //!    half-turn states that were not kept give the `twin`, refined the same way before it is
 //!    called ambiguous.
-//! 6. The joints of the small links at the end of the chain (at most 1500 fine keypoints near
-//!    them: a wrist and its flange) are swept densely in a narrow band (`distal_sweep`), and
+//! 6. The joints of the small links at the end of the chain (reaching at most 0.15 m from the
+//!    axis, with at most 1500 fine keypoints near them: a wrist and its flange) are swept densely in a narrow band (`distal_sweep`), and
 //!    everything is refined once more in a band of `polish_band_m` (5 mm), which the mixed
 //!    pixels beside a small link's silhouette mostly miss.
 //!
@@ -352,8 +352,10 @@ pub fn align_robot(
     // beside silhouettes lie within the last band (a centimetre), and on a wrist of 60-120
     // keypoints they pulled joint 5 0.02 rad off (crates/cad-scans, `robot-scans`).
     if options.polish_band_m > 0.0 {
+        // It starts converged: a few steps settle it.
         let polish = RobotFitOptions {
             band_min_m: options.polish_band_m,
+            max_iterations: POLISH_ITERATIONS,
             ..options.clone()
         };
         iterations += refine(
@@ -442,6 +444,9 @@ const GLOBAL_DELTA_PER_RADIUS: f64 = 1.0;
 /// (between 0.56 and 0.67 m) put 100 mm below this fraction. The narrower search: every link
 /// 50/50 at 50 and 100 mm on the UR10, the iiwa14 and the ABB (docs/articulated-trials.md).
 const NEAR_DELTA_PER_RADIUS: f64 = 0.18;
+
+/// Iterations of the last refinement in the narrow band (`polish_band_m`).
+const POLISH_ITERATIONS: usize = 8;
 
 /// Values of a joint the beam search follows from each of its states when the start is near
 /// (see [`NEAR_DELTA_PER_RADIUS`]).
