@@ -20,3 +20,18 @@ pub mod table;
 pub mod trials;
 
 pub use scanner::SceneError;
+
+/// A binary's end: the output on stdout and success, or the message on stderr after the
+/// program's name and exit code 2 (bad input).
+pub fn finish(program: &str, result: Result<String, String>) -> std::process::ExitCode {
+    match result {
+        Ok(text) => {
+            println!("{text}");
+            std::process::ExitCode::SUCCESS
+        }
+        Err(message) => {
+            eprintln!("{program}: {message}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}

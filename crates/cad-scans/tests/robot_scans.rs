@@ -2,11 +2,15 @@
 //! UR10 always, the ABB IRB 1600 where its support package is (the repository does not ship
 //! it: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder).
 
-use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::registration::articulated::ArticulatedBody;
 use align_core::robots::ShippedRobot;
 use cad_scans::robot::{scene_trials, seeded_scene};
 use cad_scans::scanner::ScanNoise;
+
+// The ABB's loader and trial joints, shared with align-core's articulated tests.
+#[path = "../../align-core/tests/common/abb.rs"]
+mod abb;
+use abb::{ABB_TRIAL_HOME, abb_irb1600};
 
 /// `robot-scans`'s defaults: seed 20, joints drawn up to 0.5 rad about home.
 const SEED: u64 = 20;
@@ -46,29 +50,6 @@ fn no_link_fails(
     }
 }
 
-fn abb_irb1600() -> Option<ArticulatedBody> {
-    let dir = std::env::var_os("ABB_IRB1600_SUPPORT_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../../shared/data/abb_irb1600/abb_irb1600_support")
-        });
-    let urdf = dir.join("urdf/irb1600_6_12.urdf");
-    if !urdf.is_file() {
-        eprintln!(
-            "skipped: the ABB IRB 1600 support package is not here (ABB_IRB1600_SUPPORT_DIR)"
-        );
-        return None;
-    }
-    let mut packages = PackageMap::new();
-    packages.insert("abb_irb1600_support".to_owned(), dir);
-    let model = RobotModel::from_urdf_file(&urdf, &packages).expect("the ABB URDF loads");
-    Some(ArticulatedBody::from_model(&model).expect("the ABB has surfaces"))
-}
-
-/// The ABB's joints as its trials scan it (`robot-scans`'s default home).
-const ABB_HOME: [f64; 6] = [0.0, 0.3, -0.2, 0.0, 0.6, 0.0];
-
 #[test]
 fn the_ur10_in_a_ray_cast_scan_is_fitted_within_a_millimetre_on_every_link() {
     let robot = ShippedRobot::Ur10;
@@ -84,7 +65,7 @@ fn the_abb_wrists_left_off_in_ray_cast_scans_are_found() {
     let Some(body) = abb_irb1600() else {
         return;
     };
-    no_link_fails(&body, &ABB_HOME, 0, 0.05, &[0, 4]);
+    no_link_fails(&body, &ABB_TRIAL_HOME, 0, 0.05, &[0, 4]);
 }
 
 /// In scene 2 at 200 mm, trial 1 put the base 0.44 m off, on the floor and the spurious
@@ -95,5 +76,5 @@ fn the_abb_base_lost_in_a_ray_cast_scan_at_200_mm_is_found() {
     let Some(body) = abb_irb1600() else {
         return;
     };
-    no_link_fails(&body, &ABB_HOME, 2, 0.2, &[1]);
+    no_link_fails(&body, &ABB_TRIAL_HOME, 2, 0.2, &[1]);
 }

@@ -1,6 +1,6 @@
 //! The ABB IRB 1600 (ROS-Industrial's support package, Apache-2.0), which the repository does
 //! not ship: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder.
-//! Shared by the articulated tests and the `ppf_detection` bench.
+//! Shared by the articulated tests, the `ppf_detection` bench and cad-scans' robot_scans tests.
 
 use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::registration::articulated::ArticulatedBody;

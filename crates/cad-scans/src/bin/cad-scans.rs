@@ -79,17 +79,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    match run(&args) {
-        Ok(text) => {
-            println!("{text}");
-            ExitCode::SUCCESS
-        }
-        Err(message) => {
-            eprintln!("cad-scans: {message}");
-            ExitCode::from(2)
-        }
-    }
+    cad_scans::finish("cad-scans", run(&Args::parse()))
 }
 
 fn load_parts(args: &Args) -> Result<Vec<Part>, String> {

@@ -82,17 +82,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    match run(&args) {
-        Ok(text) => {
-            println!("{text}");
-            ExitCode::SUCCESS
-        }
-        Err(message) => {
-            eprintln!("robot-scans: {message}");
-            ExitCode::from(2)
-        }
-    }
+    cad_scans::finish("robot-scans", run(&Args::parse()))
 }
 
 fn load_robot(args: &Args) -> Result<(ArticulatedBody, Vec<f64>), String> {
