@@ -27,10 +27,11 @@ const FLOOR_CLEARANCE_M: f64 = 0.01;
 /// Draws of a scene's joint values before it falls back to the home pose.
 const POSE_DRAWS: usize = 50;
 
-/// One scene: where the robot is, the joint values it was scanned at and what the scanners
-/// returned.
+/// One ray-cast scan of a robot: where the robot is, the joint values it was scanned at and
+/// what the scanners returned. (`align_core`'s `RobotScene` is the scene its own generator
+/// scans.)
 #[derive(Debug, Clone)]
-pub struct RobotScene {
+pub struct RobotScan {
     pub world_from_root: Isometry3<f64>,
     pub q: Vec<f64>,
     pub points: Vec<ScanPoint>,
@@ -39,7 +40,7 @@ pub struct RobotScene {
     pub spacing_m: Vec<f64>,
 }
 
-impl RobotScene {
+impl RobotScan {
     pub fn cloud(&self) -> Vec<Point3<f64>> {
         self.points.iter().map(|p| p.point).collect()
     }
@@ -50,7 +51,7 @@ impl RobotScene {
 }
 
 #[derive(Debug, thiserror::Error)]
-pub enum RobotSceneError {
+pub enum RobotScanError {
     #[error("'{0}' has no link with geometry to scan")]
     NoGeometry(String),
     #[error("{values} joint values for the {joints} moving joints of '{robot}'")]
@@ -114,9 +115,9 @@ pub fn scan_robot_raycast(
     q: &[f64],
     seed: u64,
     noise: &ScanNoise,
-) -> Result<RobotScene, RobotSceneError> {
+) -> Result<RobotScan, RobotScanError> {
     if q.len() != body.parameters().len() {
-        return Err(RobotSceneError::JointCount {
+        return Err(RobotScanError::JointCount {
             robot: body.robot.clone(),
             values: q.len(),
             joints: body.parameters().len(),
@@ -141,7 +142,7 @@ pub fn scan_robot_raycast(
         .flat_map(|o| o.vertices.iter().copied())
         .collect();
     if robot_vertices.is_empty() {
-        return Err(RobotSceneError::NoGeometry(body.robot.clone()));
+        return Err(RobotScanError::NoGeometry(body.robot.clone()));
     }
     let centre = bounds_centre(&robot_vertices);
     let radius_m = robot_vertices
@@ -174,7 +175,7 @@ pub fn scan_robot_raycast(
         noise,
         &mut rng,
     );
-    Ok(RobotScene {
+    Ok(RobotScan {
         world_from_root: *world_from_root,
         q: q.to_vec(),
         points,
@@ -193,7 +194,7 @@ pub fn seeded_scene(
     seed: u64,
     scene: usize,
     noise: &ScanNoise,
-) -> Result<RobotScene, RobotSceneError> {
+) -> Result<RobotScan, RobotScanError> {
     let yaw = if scene == 0 {
         0.4
     } else {
@@ -214,7 +215,7 @@ pub fn seeded_scene(
 /// scans: the base displaced by the thesis's scheme and every joint moved too.
 pub fn scene_trials(
     body: &ArticulatedBody,
-    scanned: &RobotScene,
+    scanned: &RobotScan,
     deltas_m: &[f64],
     trials: std::ops::Range<usize>,
     seed: u64,
@@ -422,7 +423,7 @@ mod tests {
         let wrong = scan_robot_raycast(&body, &root(), &home[..3], 7, &ScanNoise::default());
         assert!(matches!(
             wrong,
-            Err(RobotSceneError::JointCount { values: 3, .. })
+            Err(RobotScanError::JointCount { values: 3, .. })
         ));
     }
 }

@@ -124,32 +124,10 @@ fn load_robot(args: &Args) -> Result<(ArticulatedBody, Vec<f64>), String> {
     let home = if !args.home.is_empty() {
         args.home.clone()
     } else {
-        default_home.unwrap_or_else(|| {
-            body.parameters()
-                .iter()
-                .map(|p| 0.0f64.clamp(p.lower, p.upper))
-                .collect()
-        })
+        default_home.unwrap_or_else(|| body.values_nearest_zero())
     };
-    let parameters = body.parameters();
-    if home.len() != parameters.len() {
-        return Err(format!(
-            "--home: {} values for the {} moving joints of '{}'",
-            home.len(),
-            parameters.len(),
-            body.robot
-        ));
-    }
-    if let Some((value, p)) = home
-        .iter()
-        .zip(parameters)
-        .find(|(v, p)| !(p.lower..=p.upper).contains(*v))
-    {
-        return Err(format!(
-            "--home: {value} for joint '{}' is outside its limits [{}, {}]",
-            p.name, p.lower, p.upper
-        ));
-    }
+    body.check_values(&home)
+        .map_err(|message| format!("--home: {message}"))?;
     Ok((body, home))
 }
 

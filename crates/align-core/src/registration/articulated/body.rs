@@ -234,6 +234,44 @@ impl ArticulatedBody {
         &self.parameters
     }
 
+    /// Each parameter at 0, or at the limit nearest 0: a pose every joint can take, for a robot
+    /// with no home of its own.
+    pub fn values_nearest_zero(&self) -> Vec<f64> {
+        self.parameters
+            .iter()
+            .map(|p| 0.0f64.clamp(p.lower, p.upper))
+            .collect()
+    }
+
+    /// Why `values` are not one value per parameter, each within its joint's limits (a message
+    /// naming the joints, for the option or message that gave them); `Ok` when they are.
+    pub fn check_values(&self, values: &[f64]) -> Result<(), String> {
+        if values.len() != self.parameters.len() {
+            return Err(format!(
+                "{} values for the {} moving joints of '{}' ({})",
+                values.len(),
+                self.parameters.len(),
+                self.robot,
+                self.parameters
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+        match values
+            .iter()
+            .zip(&self.parameters)
+            .find(|(value, p)| !(p.lower..=p.upper).contains(*value))
+        {
+            Some((value, p)) => Err(format!(
+                "{value} for joint '{}' is outside its limits [{}, {}]",
+                p.name, p.lower, p.upper
+            )),
+            None => Ok(()),
+        }
+    }
+
     pub fn root(&self) -> usize {
         self.order[0]
     }
@@ -469,6 +507,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn joint_values_are_checked_for_count_and_limits_and_a_neutral_pose_is_within_them() {
+        let urdf = r#"<robot name="slide">
+            <link name="beam"><visual><geometry><box size="1 0.1 0.1"/></geometry></visual></link>
+            <link name="carriage"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>
+            <joint name="travel" type="prismatic"><parent link="beam"/><child link="carriage"/>
+              <axis xyz="1 0 0"/><limit lower="0.1" upper="0.4" effort="1" velocity="1"/></joint>
+        </robot>"#;
+        let model = RobotModel::from_urdf_str(urdf, &Default::default()).unwrap();
+        let body = ArticulatedBody::from_model(&model).unwrap();
+        assert_eq!(body.values_nearest_zero(), [0.1]);
+        assert_eq!(body.check_values(&[0.25]), Ok(()));
+        let count = body.check_values(&[0.2, 0.3]).unwrap_err();
+        assert!(
+            count.contains("2 values for the 1 moving joints of 'slide' (travel)"),
+            "{count}"
+        );
+        let outside = body.check_values(&[0.5]).unwrap_err();
+        assert!(
+            outside.contains("0.5 for joint 'travel' is outside its limits"),
+            "{outside}"
+        );
     }
 
     #[test]

@@ -106,44 +106,14 @@ fn load_robot(args: &TrialsArgs) -> Result<(ArticulatedBody, Vec<f64>), BadInput
     let home = match (&args.home, shipped) {
         (Some(text), _) => {
             let home = crate::parse_number_list(text, "--home")?;
-            check_home(&body, &home)?;
+            body.check_values(&home)
+                .map_err(|message| BadInput(format!("--home: {message}")))?;
             home
         }
         (None, Some(robot)) => robot.home(),
-        (None, None) => body
-            .parameters()
-            .iter()
-            .map(|p| 0.0f64.clamp(p.lower, p.upper))
-            .collect(),
+        (None, None) => body.values_nearest_zero(),
     };
     Ok((body, home))
-}
-
-/// `--home` has one finite value per parameter, each within its joint's limits.
-fn check_home(body: &ArticulatedBody, home: &[f64]) -> Result<(), BadInput> {
-    let parameters = body.parameters();
-    if home.len() != parameters.len() {
-        return Err(BadInput(format!(
-            "--home: {} values for the {} moving joints of '{}' ({})",
-            home.len(),
-            parameters.len(),
-            body.robot,
-            parameters
-                .iter()
-                .map(|p| p.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
-    }
-    for (value, parameter) in home.iter().zip(parameters) {
-        if !(parameter.lower..=parameter.upper).contains(value) {
-            return Err(BadInput(format!(
-                "--home: {value} for joint '{}' is outside its limits [{}, {}]",
-                parameter.name, parameter.lower, parameter.upper
-            )));
-        }
-    }
-    Ok(())
 }
 
 pub fn run(
