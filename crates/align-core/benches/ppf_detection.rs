@@ -6,7 +6,8 @@
 //! each of `--runs` detections (min / median / max). Where the ABB IRB 1600's support package is
 //! (`$ABB_IRB1600_SUPPORT_DIR`, else `../shared/data` beside the workspace; the repository does
 //! not ship it), its proximal links too, in the full scan of its trials (`ips trials --urdf`,
-//! about 90k points at its trial pose): the case the fit meets at 1000 mm.
+//! about 90k points at its trial pose): the case the fit meets at 1000 mm; and its base alone,
+//! which the fit detects instead since the eighteenth session (its base is not round).
 //! Run: cargo bench -p align-core --bench ppf_detection [-- --runs N]
 
 use std::time::Instant;
@@ -72,6 +73,12 @@ fn main() {
         let mut objects = vec![("proximal links", first_movers)];
         if with_whole {
             objects.push(("whole robot", all));
+        } else {
+            // A base that is not round is detected alone (the links no joint moves).
+            let fixed: Vec<usize> = (0..body.links().len())
+                .filter(|&link| body.movers(link).is_empty())
+                .collect();
+            objects.push(("base alone", fixed));
         }
         for (what, links) in objects {
             let Some(mesh) = body.rigid_mesh_of(&home, &links) else {
