@@ -1,12 +1,14 @@
 //! Hierarchical alignment of a whole robot (UR10, iiwa14) in a cluttered 20k-point scan from a
 //! start 100 mm off; and preparing the robot for it (`ArticulatedBody::from_model`: link
-//! surfaces and their distance grids), which a service does once per robot model.
+//! surfaces and their distance grids), which a service does once per robot model; and the fit's
+//! first step alone, the isolated returns' removal, on the same scan.
 //! Run: cargo bench -p align-core --bench articulated
 
 use std::hint::black_box;
 use std::time::Duration;
 
 use align_core::registration::articulated::{ArticulatedBody, RobotFitOptions, align_robot};
+use align_core::registration::sampling::without_isolated;
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
 use align_core::trials::robot_trials::perturb_robot;
@@ -41,6 +43,19 @@ fn articulated(c: &mut Criterion) {
             cloud.len(),
             probe.rms_m * 1e3,
             probe.iterations
+        );
+        // The fit's first step, alone: its cost was measured only inside the fit before.
+        group.bench_function(
+            format!("{}_20k_points_isolated_returns", robot.name()),
+            |b| {
+                b.iter(|| {
+                    black_box(without_isolated(
+                        &cloud,
+                        options.voxel_m,
+                        options.isolated_min_neighbours,
+                    ))
+                })
+            },
         );
         group.bench_function(format!("{}_20k_points_delta_100mm", robot.name()), |b| {
             b.iter(|| {
