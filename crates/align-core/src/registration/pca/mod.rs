@@ -32,7 +32,7 @@ use self::exploration::{
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::matching::{Lookup, correspond, near_surface};
 use self::planes::without_large_planes;
-pub(crate) use self::planes::without_large_planes as without_planes_larger_than;
+pub use self::planes::without_large_planes as without_planes_larger_than;
 use self::polish::polish;
 pub use self::schedule::{DeltaSchedule, WideBandMatching};
 use self::schedule::{

@@ -34,7 +34,7 @@ const LARGER_THAN_PART: f64 = 2.0;
 /// `coarse` (keypoints one per voxel of `voxel_m`) without the points of every plane holding
 /// more of the scan than the part's whole surface could ([`LARGER_THAN_PART`] times its area
 /// over a voxel's face).
-pub(crate) fn without_large_planes(
+pub fn without_large_planes(
     mut coarse: Vec<Point3<f64>>,
     mesh: &Mesh,
     voxel_m: f64,
