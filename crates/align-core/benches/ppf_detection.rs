@@ -130,7 +130,7 @@ fn main() {
             let mut poses = Vec::new();
             for _ in 0..runs {
                 let clock = Instant::now();
-                poses = ppf_poses(&mesh, &cloud, &centre, 2.0, &options, 4, 0.3);
+                poses = ppf_poses(&mesh, cloud, &centre, 2.0, &options, 4, 0.3);
                 times_ms.push(clock.elapsed().as_secs_f64() * 1e3);
             }
             times_ms.sort_by(f64::total_cmp);
