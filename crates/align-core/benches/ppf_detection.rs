@@ -79,49 +79,49 @@ fn main() {
             .collect();
         let all: Vec<usize> = (0..body.links().len()).collect();
         let proximal = body.rigid_mesh_of(&home, &first_movers);
-        let mut objects = vec![("proximal links", first_movers, &cloud)];
+        let (without_planes, above_floor);
+        let mut objects = vec![("proximal links", proximal.clone(), &cloud)];
         if with_whole {
-            objects.push(("whole robot", all, &cloud));
-        }
-        // The scene as the fit detects in it since the eighteenth session: without the planes
-        // larger than the proximal links, at the detection's step.
-        // What the planes test leaves of the floor shows against the floor cut where the
-        // scene put it (z = 0), which the fit does not know.
-        let above_floor: Vec<Point3<f64>> = cloud
-            .iter()
-            .filter(|p| p.z > FLOOR_CUT_M)
-            .copied()
-            .collect();
-        let without_planes = proximal.as_ref().map_or_else(Vec::new, |mesh| {
-            without_planes_larger_than(
-                voxel_representatives(&cloud, options.step_m),
-                mesh,
-                options.step_m,
-            )
-        });
-        if !with_whole {
-            let fixed: Vec<usize> = (0..body.links().len())
-                .filter(|&link| body.movers(link).is_empty())
-                .collect();
-            objects.push((
-                "proximal links, no plane larger than them",
-                objects[0].1.clone(),
-                &without_planes,
-            ));
+            objects.push(("whole robot", body.rigid_mesh_of(&home, &all), &cloud));
+        } else {
+            // The scene as the fit detects in it since the eighteenth session: without the
+            // planes larger than the proximal links, at the detection's step. Against it, the
+            // floor cut where the scene put it (z = 0), which the fit does not know: what the
+            // planes test leaves of the floor shows in the difference.
+            without_planes = proximal.as_ref().map_or_else(Vec::new, |mesh| {
+                without_planes_larger_than(
+                    voxel_representatives(&cloud, options.step_m),
+                    mesh,
+                    options.step_m,
+                )
+            });
+            above_floor = cloud
+                .iter()
+                .filter(|p| p.z > FLOOR_CUT_M)
+                .copied()
+                .collect::<Vec<Point3<f64>>>();
             // A base that is not round is detected alone (the links no joint moves).
-            objects.push((
-                "base alone, no plane larger than the proximal links",
-                fixed.clone(),
-                &without_planes,
-            ));
-            objects.push((
-                "base alone, floor cut at its known height",
-                fixed,
-                &above_floor,
-            ));
+            let base_alone = body.fixed_mesh(&home);
+            objects.extend([
+                (
+                    "proximal links, no plane larger than them",
+                    proximal,
+                    &without_planes,
+                ),
+                (
+                    "base alone, no plane larger than the proximal links",
+                    base_alone.clone(),
+                    &without_planes,
+                ),
+                (
+                    "base alone, floor cut at its known height",
+                    base_alone,
+                    &above_floor,
+                ),
+            ]);
         }
-        for (what, links, cloud) in objects {
-            let Some(mesh) = body.rigid_mesh_of(&home, &links) else {
+        for (what, mesh, cloud) in objects {
+            let Some(mesh) = mesh else {
                 continue;
             };
             let centre = world_from_root * Point3::origin();

@@ -82,9 +82,9 @@ fn the_abb_base_lost_in_a_ray_cast_scan_at_200_mm_is_found() {
 /// In scene 0 at 1000 mm (the global search) the base was lost in both trials: in trial 0 the
 /// floor's points, most of the detection's references, outvoted the robot's (no detected
 /// pose within 0.1 m of the truth); in trial 1 the first joint's link, in the model at the
-/// start's value, pulled the best-voted pose 0.19 m off, and the fit ended 0.6 m off. The
-/// detection now leaves out the planes larger than the proximal links and detects a base that
-/// is not round alone.
+/// start's value, pulled the best-voted pose 0.19 m off, and the fit ended 0.6 m off (a probe
+/// of the detection, not kept; docs/articulated-trials.md). The detection now leaves out the
+/// planes larger than the proximal links and detects a base that is not round alone.
 #[test]
 fn the_abb_base_lost_in_ray_cast_scans_at_1000_mm_is_found() {
     let Some(body) = abb_irb1600() else {

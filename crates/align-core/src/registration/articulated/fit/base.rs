@@ -65,25 +65,19 @@ impl FitContext<'_> {
             // the project's own scans, whose floor is too small for the planes test below, the
             // base alone is detected 0.4 m off (`ppf_detection` bench) and the fit found 49 of
             // 50 at 1000 mm (50 before): a test for the floor the robot stands on is open.
-            let fixed: Vec<usize> = (0..body.links().len())
-                .filter(|&l| body.movers(l).is_empty())
-                .collect();
-            let detected_mesh = round_base
-                .is_none()
-                .then(|| body.rigid_mesh_of(q0, &fixed))
-                .flatten()
-                .unwrap_or_else(|| mesh.clone());
+            let base_alone = round_base.is_none().then(|| body.fixed_mesh(q0)).flatten();
+            let detected_mesh = base_alone.as_ref().unwrap_or(&mesh);
             // A ray-cast scan's floor reaches metres around the robot: most of the detection's
             // references then lie on it, and the pairs they make with the robot's points vote
             // for poses of their own. In scenes 0, 1 and 3 of `robot-scans` at 1000 mm none of
             // the 40 best-voted poses of the ABB's base and link_1 lay within 0.1 m of the
-            // truth; without the planes larger than those links, the best-voted pose lay 22-166
-            // mm from it. No such plane can be the base or the first joint's link.
+            // truth; without the floor, the best-voted pose lay 22-166 mm from it (a probe, not
+            // kept). No plane larger than the base and the first joint's link can be them.
             let step_m = options.detection.step_m;
             let scene =
                 without_planes_larger_than(voxel_representatives(cloud, step_m), &mesh, step_m);
             ppf_poses(
-                &detected_mesh,
+                detected_mesh,
                 &scene,
                 &(world_from_root_start * Point3::origin()),
                 root_bound_m,
