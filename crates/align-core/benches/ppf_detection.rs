@@ -9,12 +9,13 @@
 //! about 90k points at its trial pose): the case the fit meets at 1000 mm; and, in that scan
 //! without the planes larger than the proximal links (as the fit detects since the eighteenth
 //! session), the proximal links and the base alone, which the fit detects instead (the ABB's
-//! base is not round).
+//! base is not round), and the base alone in that scan without the floor under it too (as the
+//! fit detects it since the nineteenth session).
 //! Run: cargo bench -p align-core --bench ppf_detection [-- --runs N]
 
 use std::time::Instant;
 
-use align_core::registration::pca::without_planes_larger_than;
+use align_core::registration::pca::{without_floor_under, without_planes_larger_than};
 use align_core::registration::ppf::{PpfOptions, ppf_poses};
 use align_core::registration::sampling::voxel_representatives;
 use align_core::robots::ShippedRobot;
@@ -79,7 +80,7 @@ fn main() {
             .collect();
         let all: Vec<usize> = (0..body.links().len()).collect();
         let proximal = body.rigid_mesh_of(&home, &first_movers);
-        let (without_planes, above_floor);
+        let (without_planes, without_floor, above_floor);
         let mut objects = vec![("proximal links", proximal.clone(), &cloud)];
         if with_whole {
             objects.push(("whole robot", body.rigid_mesh_of(&home, &all), &cloud));
@@ -95,13 +96,17 @@ fn main() {
                     options.step_m,
                 )
             });
+            // And as it detects a base that is not round (alone: the links no joint moves)
+            // since the nineteenth session: without the floor under it too, however small.
+            let base_alone = body.fixed_mesh(&home);
+            without_floor = base_alone.as_ref().map_or_else(Vec::new, |base| {
+                without_floor_under(without_planes.clone(), base, options.step_m)
+            });
             above_floor = cloud
                 .iter()
                 .filter(|p| p.z > FLOOR_CUT_M)
                 .copied()
                 .collect::<Vec<Point3<f64>>>();
-            // A base that is not round is detected alone (the links no joint moves).
-            let base_alone = body.fixed_mesh(&home);
             objects.extend([
                 (
                     "proximal links, no plane larger than them",
@@ -112,6 +117,11 @@ fn main() {
                     "base alone, no plane larger than the proximal links",
                     base_alone.clone(),
                     &without_planes,
+                ),
+                (
+                    "base alone, no plane larger than the proximal links nor the floor under it",
+                    base_alone.clone(),
+                    &without_floor,
                 ),
                 (
                     "base alone, floor cut at its known height",

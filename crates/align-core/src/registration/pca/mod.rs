@@ -31,6 +31,7 @@ use self::exploration::{
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::matching::{Lookup, correspond, near_surface};
+pub use self::planes::without_floor_under;
 use self::planes::without_large_planes;
 pub use self::planes::without_large_planes as without_planes_larger_than;
 use self::polish::polish;
