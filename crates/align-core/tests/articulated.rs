@@ -417,3 +417,12 @@ fn the_abb_wrists_lost_at_200_mm_are_found() {
 fn the_abb_bases_lost_at_1000_mm_are_found() {
     abb_trials_succeed(1.0, &[17, 21]);
 }
+
+/// Trial 15 of the ABB at 1000 mm lost every link once its base was detected alone: the scan's
+/// floor, 0.6 m^2 around the base, is too small for the planes test (it holds fewer keypoints
+/// than the base's whole surface could) and its votes put the base 0.4 m off (`ppf_detection`
+/// bench). With the floor the base stands on left out, whatever its size, 50 of 50 are found.
+#[test]
+fn the_abb_base_lost_on_a_small_floor_at_1000_mm_is_found() {
+    abb_trials_succeed(1.0, &[15]);
+}
