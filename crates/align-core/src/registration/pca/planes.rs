@@ -194,8 +194,7 @@ fn largest_plane_by_neighbours(
     }
     let draw =
         |rng: &mut SplitMix64, len: usize| ((rng.uniform() * len as f64) as usize).min(len - 1);
-    let mut best: Option<(usize, Point3<f64>, Vector3<f64>)> = None;
-    for _ in 0..HYPOTHESES {
+    most_supported_plane(&sample, || {
         let a = sample[draw(rng, sample.len())];
         let near: Vec<&Point3<f64>> = sample
             .iter()
@@ -203,9 +202,27 @@ fn largest_plane_by_neighbours(
             .filter(|p| (*p - a).norm_squared() <= NEIGHBOURHOOD_M * NEIGHBOURHOOD_M)
             .collect();
         if near.len() < 3 {
-            continue;
+            return None;
         }
-        let (b, c) = (near[draw(rng, near.len())], near[draw(rng, near.len())]);
+        Some((
+            *a,
+            *near[draw(rng, near.len())],
+            *near[draw(rng, near.len())],
+        ))
+    })
+}
+
+/// Of [`HYPOTHESES`] planes, each through three points `triple` draws (`None`: no plane this
+/// time), the one most of `sample` lies on, as a point on it and its unit normal.
+fn most_supported_plane(
+    sample: &[&Point3<f64>],
+    mut triple: impl FnMut() -> Option<(Point3<f64>, Point3<f64>, Point3<f64>)>,
+) -> Option<(Point3<f64>, Vector3<f64>)> {
+    let mut best: Option<(usize, Point3<f64>, Vector3<f64>)> = None;
+    for _ in 0..HYPOTHESES {
+        let Some((a, b, c)) = triple() else {
+            continue;
+        };
         let Some(normal) = (b - a).cross(&(c - a)).try_normalize(1e-12) else {
             continue;
         };
@@ -214,7 +231,7 @@ fn largest_plane_by_neighbours(
             .filter(|p| (**p - a).dot(&normal).abs() <= ON_PLANE_M)
             .count();
         if best.as_ref().is_none_or(|(most, _, _)| count > *most) {
-            best = Some((count, *a, normal));
+            best = Some((count, a, normal));
         }
     }
     best.map(|(_, origin, normal)| (origin, normal))
@@ -242,21 +259,7 @@ fn largest_plane(
         let index = ((rng.uniform() * points.len() as f64) as usize).min(points.len() - 1);
         points[index]
     };
-    let mut best: Option<(usize, Point3<f64>, Vector3<f64>)> = None;
-    for _ in 0..HYPOTHESES {
-        let (a, b, c) = (pick(rng), pick(rng), pick(rng));
-        let Some(normal) = (b - a).cross(&(c - a)).try_normalize(1e-12) else {
-            continue;
-        };
-        let count = sample
-            .iter()
-            .filter(|p| (**p - a).dot(&normal).abs() <= ON_PLANE_M)
-            .count();
-        if best.as_ref().is_none_or(|(most, _, _)| count > *most) {
-            best = Some((count, a, normal));
-        }
-    }
-    best.map(|(_, origin, normal)| (origin, normal))
+    most_supported_plane(&sample, || Some((pick(rng), pick(rng), pick(rng))))
 }
 
 #[cfg(test)]
