@@ -74,8 +74,9 @@ impl FitContext<'_> {
             let mut scene =
                 without_planes_larger_than(voxel_representatives(cloud, step_m), &mesh, step_m);
             // A floor too small for that test still outvotes a base detected alone: on the
-            // project's own scans of the ABB its base was detected 0.4 m off, and 5.5 mm off
-            // without the floor (`ppf_detection` bench), and the fit found 49 of 50 at 1000 mm.
+            // project's own scans of the ABB its base was detected 0.4 m off, and 10 mm off
+            // without the floor under it (`ppf_detection` bench); the fit found 49 of 50 at
+            // 1000 mm, and finds 50 now (docs/articulated-trials.md).
             if let Some(base) = &base_alone {
                 scene = without_floor_under(scene, base, step_m);
             }

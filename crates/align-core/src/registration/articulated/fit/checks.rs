@@ -25,9 +25,11 @@ const TWINS_REFINED: usize = 3;
 /// kept a flip).
 const FLIP_ROUNDS: usize = 3;
 
-/// Coarse turns of the base [`FitContext::base_turn_check`] looks at finely, at least
-/// [`BASE_TURN_PEAK_STEPS`] coarse steps apart (twelve keypoint voxels at the base's reach).
+/// Coarse turns of the base [`FitContext::base_turn_check`] looks at finely.
 const BASE_TURN_PEAKS: usize = 4;
+
+/// Coarse steps between two of those turns at least: twelve keypoint voxels at the base's
+/// reach, so that one broad peak's noise does not fill them all.
 const BASE_TURN_PEAK_STEPS: f64 = 4.0;
 
 /// The window (each way) from which a joint gets a second look after a global search, rad.
@@ -422,10 +424,7 @@ impl FitContext<'_> {
         let fine_step = 0.5 * options.voxel_m / reach;
         let margin = options.min_link_points as i64;
         let fine_band = options.voxel_m;
-        let coarse = scored_about(0.0, half, coarse_step, 3.0 * options.voxel_m);
-        if coarse.is_empty() {
-            return 0;
-        }
+        let mut by_score = scored_about(0.0, half, coarse_step, 3.0 * options.voxel_m);
         // The best few coarse turns, each at least [`BASE_TURN_PEAK_STEPS`] coarse steps from
         // the others, are looked at finely: the coarse band blurs a base's narrow fine peak and
         // scores a broad wrong one higher. The ABB IRB 1600's base ended 2.94 rad turned
@@ -433,7 +432,6 @@ impl FitContext<'_> {
         // links above) in a ray-cast scan at 1000 mm (`robot-scans` scene 0, trial 5): there
         // the check's coarse scores put a wrong turn 64 keypoints above the truth's, whose fine
         // score was 405 above the wrong one's (a probe, not kept).
-        let mut by_score = coarse.clone();
         by_score.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.abs().total_cmp(&b.0.abs())));
         let separation = BASE_TURN_PEAK_STEPS * coarse_step;
         let mut peaks: Vec<f64> = Vec::new();
