@@ -10,4 +10,6 @@ mod spread;
 pub use distance_grid::DistanceGrid;
 pub use facing_tree::NearbyTriangles;
 pub use mesh::{Mesh, MeshError, SignedClosest, SurfacePoint};
-pub use spread::{PLAUSIBLE_PART_SIZE_M, PrincipalSpread, human_length, implausible_size_warning};
+pub use spread::{
+    PLAUSIBLE_PART_SIZE_M, PrincipalSpread, human_length, implausible_size_warning, plane_through,
+};

@@ -44,6 +44,29 @@ impl PrincipalSpread {
     }
 }
 
+/// The least-squares plane through `points`: their centroid and the unit normal along which
+/// they spread least (the scatter's smallest eigenvector). `None` for fewer than three points.
+/// The sign of the normal is whatever the eigen solver returns.
+pub fn plane_through(points: &[Point3<f64>]) -> Option<(Point3<f64>, Vector3<f64>)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let mean = points
+        .iter()
+        .fold(Vector3::zeros(), |sum, p| sum + p.coords)
+        / points.len() as f64;
+    let scatter = points.iter().fold(Matrix3::zeros(), |sum, p| {
+        let d = p.coords - mean;
+        sum + d * d.transpose()
+    });
+    let eigen = scatter.symmetric_eigen();
+    let normal = eigen
+        .eigenvectors
+        .column(eigen.eigenvalues.imin())
+        .normalize();
+    Some((Point3::from(mean), normal))
+}
+
 /// A part a cobot handles and a scanner sees: from 1 mm to 10 m across. Outside that range the
 /// number is far more likely a unit mistake (mm read as m gives 1000x, m read as mm 1/1000x)
 /// than a real part.
@@ -104,6 +127,24 @@ pub fn implausible_size_warning(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_plane_through_points_on_a_tilted_plane_is_that_plane() {
+        let normal = Vector3::new(1.0, -2.0, 3.0).normalize();
+        let across = normal.cross(&Vector3::x()).normalize();
+        let along = normal.cross(&across);
+        let origin = Point3::new(0.3, -0.1, 0.7);
+        let points: Vec<Point3<f64>> = (0..25)
+            .map(|i| {
+                let (u, v) = (f64::from(i % 5) * 0.01, f64::from(i / 5) * 0.02);
+                origin + u * across + v * along
+            })
+            .collect();
+        let (centroid, fitted) = plane_through(&points).unwrap();
+        assert!((fitted.dot(&normal).abs() - 1.0).abs() < 1e-12, "{fitted}");
+        assert!((centroid - origin).dot(&normal).abs() < 1e-12);
+        assert_eq!(plane_through(&points[..2]), None);
+    }
 
     #[test]
     fn spread_finds_the_line_and_the_plane() {

@@ -14,11 +14,11 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::sampling::voxel_representatives;
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, plane_through};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct PpfOptions {
@@ -136,19 +136,10 @@ fn scene_samples(cloud: &[Point3<f64>], step_m: f64) -> Vec<Oriented> {
             if neighbours.len() < 5 {
                 return None;
             }
-            let mean = neighbours
-                .iter()
-                .fold(Vector3::zeros(), |sum, p| sum + p.coords)
-                / neighbours.len() as f64;
-            let covariance = neighbours.iter().fold(Matrix3::zeros(), |sum, p| {
-                let d = p.coords - mean;
-                sum + d * d.transpose()
-            });
-            let eigen = covariance.symmetric_eigen();
-            let smallest = eigen.eigenvalues.imin();
+            let (_, normal) = plane_through(&neighbours)?;
             Some(Oriented {
                 point: *point,
-                normal: eigen.eigenvectors.column(smallest).normalize(),
+                normal,
             })
         })
         .collect()

@@ -8,9 +8,9 @@
 //! run keep them: there the band is narrow and the edge rejection drops the floor at the part's
 //! foot.
 
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, plane_through};
 use crate::rng::SplitMix64;
 
 /// A point this close to a plane lies on it: six standard deviations of the scanner noise the
@@ -158,24 +158,12 @@ fn refit(
     coarse: &[Point3<f64>],
     (origin, normal): &(Point3<f64>, Vector3<f64>),
 ) -> Option<(Point3<f64>, Vector3<f64>)> {
-    let on: Vec<&Point3<f64>> = coarse
+    let on: Vec<Point3<f64>> = coarse
         .iter()
         .filter(|p| (*p - origin).dot(normal).abs() <= ON_PLANE_M)
+        .copied()
         .collect();
-    if on.len() < 3 {
-        return None;
-    }
-    let mean = on.iter().fold(Vector3::zeros(), |sum, p| sum + p.coords) / on.len() as f64;
-    let scatter = on.iter().fold(Matrix3::zeros(), |sum, p| {
-        let d = p.coords - mean;
-        sum + d * d.transpose()
-    });
-    let eigen = scatter.symmetric_eigen();
-    let refitted = eigen
-        .eigenvectors
-        .column(eigen.eigenvalues.imin())
-        .normalize();
-    Some((Point3::from(mean), refitted))
+    plane_through(&on)
 }
 
 /// The largest triangles whose planes [`largest_face_area_m2`] tries.
