@@ -105,3 +105,19 @@ fn the_abb_base_turned_in_a_ray_cast_scan_at_1000_mm_is_found() {
     };
     no_link_fails(&body, &ABB_TRIAL_HOME, 0, 1.0, &[5]);
 }
+
+/// In scene 1 the wrist shows on some 65 keypoints, its joint 5 on about ten of them (link_5 is
+/// round about that joint; the flange's side carries it). At 50 mm link_5 failed in 9 trials of
+/// 10 (a probe, not kept): in seven, trial 1 among them, the fit had joint 5 within 0.006 rad
+/// and the observability test, which wanted the motion spread over 12 points, reset it to the
+/// start's; in three, trial 5 among them, the wrist's sweep counted 57 keypoints in its band at
+/// the truth against 52 where it was (1.6 mm rms against 0.4 mm), short of its gain of 8, and
+/// left joint 5 0.12 rad off. The sweep now grades each point by its distance, and the test
+/// asks that the evidence survive losing its three strongest points.
+#[test]
+fn the_abb_wrist_seen_on_a_few_points_in_a_ray_cast_scan_is_fitted() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails(&body, &ABB_TRIAL_HOME, 1, 0.05, &[1, 5]);
+}

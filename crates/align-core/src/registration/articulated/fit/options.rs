@@ -15,6 +15,11 @@ pub struct RobotFitOptions {
     /// A joint whose motion moves its points along their normals by less than this fraction of
     /// its reach per radian (RMS) is not constrained by the scan.
     pub min_observability: f64,
+    /// A joint is observed only when the scan pins it to within this at its reach (one
+    /// standard deviation, from the points' residuals, without the few points that carry most
+    /// of its evidence: see `observed_parameters`), m: half the millimetre the trials call
+    /// success.
+    pub observed_within_m: f64,
     pub search_passes: usize,
     /// States the first search down the tree keeps at each joint.
     pub beam_width: usize,
@@ -70,6 +75,7 @@ impl Default for RobotFitOptions {
             band_min_m: 0.01,
             min_link_points: 12,
             min_observability: 0.05,
+            observed_within_m: 0.0005,
             search_passes: 2,
             beam_width: 6,
             // About a third of a 100 mm fit's instructions less (`articulated_starts`, callgrind)

@@ -196,6 +196,63 @@ impl<'a> Placed<'a> {
         if buried { -2 } else { 0 }
     }
 
+    /// [`Self::evidence`] graded by distance, from exact surface queries: `1 - (d / band)^2` for
+    /// a point `d` from the nearest surface of `links` (within `band` outside, `inside_m`
+    /// inside), -2 for a point buried deeper in one, 0 otherwise. A count within the band cannot
+    /// tell a wrist on its scan from one a few millimetres off that keeps most of its points
+    /// within the band (the ABB IRB 1600's joint 5 in ray-cast scans: 57 points against 52-54,
+    /// at 0.4 mm and 1.6 mm rms); the grade can. The distance grid blurs a millimetre, so the
+    /// queries go to the meshes.
+    pub(super) fn closeness(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        links: &[usize],
+    ) -> f64 {
+        let mut best: Option<f64> = None;
+        let mut buried = false;
+        let reach = band.max(inside_m);
+        for &link in links {
+            let Some(surface) = &self.body.links()[link].surface else {
+                continue;
+            };
+            if !self.within_reach(point, link, reach) {
+                continue;
+            }
+            let local = self.inverse[link] * point;
+            let (lower, upper) = surface.bounds();
+            if !(0..3).all(|a| local[a] >= lower[a] - reach && local[a] <= upper[a] + reach) {
+                continue;
+            }
+            match surface.closest_point_within(&local, reach) {
+                Some(closest)
+                    if closest.signed_distance >= -inside_m && closest.signed_distance <= band =>
+                {
+                    let off = closest.signed_distance.abs() / band.max(inside_m);
+                    let grade = 1.0 - off * off;
+                    best = Some(best.map_or(grade, |b: f64| b.max(grade)));
+                }
+                Some(closest) if closest.signed_distance < -inside_m => buried = true,
+                Some(_) => {}
+                None => {
+                    let in_box = (0..3).all(|a| local[a] >= lower[a] && local[a] <= upper[a]);
+                    if in_box
+                        && surface.is_watertight()
+                        && surface.closest_point(&local).signed_distance < -inside_m
+                    {
+                        buried = true;
+                    }
+                }
+            }
+        }
+        match best {
+            Some(grade) => grade,
+            None if buried => -2.0,
+            None => 0.0,
+        }
+    }
+
     /// [`Self::evidence`] of a point another link's surface is `claimed_m` from (infinite when
     /// none is near): such a point counts for `links` only where they come nearer to it, and
     /// never against them (links meet at their joints).

@@ -516,3 +516,36 @@ fn a_point_outside_the_swept_tubes_counts_nothing_at_any_value() {
         );
     }
 }
+
+#[test]
+fn closeness_grades_a_point_by_its_distance_where_evidence_only_counts_it() {
+    let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
+    let body = ArticulatedBody::from_model(&model).unwrap();
+    let base = (0..body.links().len())
+        .find(|&l| body.links()[l].name == "base")
+        .unwrap();
+    let placed = Placed::new(&body, &Isometry3::identity(), &[0.0; 6]);
+    let band = 0.003;
+    // The base is a 0.4 m box from z = 0 to 0.3: its face x = 0.2, off it by `off_m` (negative
+    // inside).
+    let at = |off_m: f64| Point3::new(0.2 + off_m, 0.05, 0.1);
+    let grade = |off_m: f64| placed.closeness(&at(off_m), band, band, &[base]);
+    for (off_m, expected) in [
+        (0.0, 1.0),
+        (0.0015, 0.75),
+        (-0.0015, 0.75),
+        (0.0029, 1.0 - (0.0029f64 / band).powi(2)),
+    ] {
+        assert!(
+            (grade(off_m) - expected).abs() < 1e-9,
+            "{off_m} m: {}",
+            grade(off_m)
+        );
+        assert_eq!(placed.evidence(&at(off_m), band, band, &[base]), 1);
+    }
+    // Beyond the band it counts nothing; buried deep in the solid it counts against, as
+    // evidence does.
+    assert_eq!(grade(0.004), 0.0);
+    assert_eq!(grade(-0.05), -2.0);
+    assert_eq!(placed.evidence(&at(-0.05), band, band, &[base]), -2);
+}
