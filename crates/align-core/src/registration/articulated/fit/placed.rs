@@ -3,6 +3,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
+use crate::geometry::Mesh;
 use crate::registration::articulated::body::ArticulatedBody;
 
 /// A keypoint matched to a link surface.
@@ -182,15 +183,7 @@ impl<'a> Placed<'a> {
             match surface.closest_point_within(&local, band) {
                 Some(closest) if closest.signed_distance >= -inside_m => return 1,
                 Some(_) => buried = true,
-                None => {
-                    let in_box = (0..3).all(|a| local[a] >= lower[a] && local[a] <= upper[a]);
-                    if in_box
-                        && surface.is_watertight()
-                        && surface.closest_point(&local).signed_distance < -inside_m
-                    {
-                        buried = true;
-                    }
-                }
+                None => buried |= deep_inside(surface, &local, inside_m),
             }
         }
         if buried { -2 } else { 0 }
@@ -235,15 +228,7 @@ impl<'a> Placed<'a> {
                 }
                 Some(closest) if closest.signed_distance < -inside_m => buried = true,
                 Some(_) => {}
-                None => {
-                    let in_box = (0..3).all(|a| local[a] >= lower[a] && local[a] <= upper[a]);
-                    if in_box
-                        && surface.is_watertight()
-                        && surface.closest_point(&local).signed_distance < -inside_m
-                    {
-                        buried = true;
-                    }
-                }
+                None => buried |= deep_inside(surface, &local, inside_m),
             }
         }
         match best {
@@ -322,6 +307,16 @@ impl<'a> Placed<'a> {
             };
         (distance <= limit).then_some(distance)
     }
+}
+
+/// Whether `local` (mesh frame), farther than any band from `surface`, lies more than
+/// `inside_m` inside it: only a watertight mesh has an inside, and only a point within its
+/// bounds can be in it.
+fn deep_inside(surface: &Mesh, local: &Point3<f64>, inside_m: f64) -> bool {
+    let (lower, upper) = surface.bounds();
+    (0..3).all(|a| local[a] >= lower[a] && local[a] <= upper[a])
+        && surface.is_watertight()
+        && surface.closest_point(local).signed_distance < -inside_m
 }
 
 const EDGE_REJECTION_M: f64 = 1e-3;
