@@ -9,8 +9,8 @@ pub struct RobotFitOptions {
     pub voxel_m: f64,
     /// The band the refinement ends with: points farther from every link are not used, m.
     pub band_min_m: f64,
-    /// A link with fewer points than this is reported as not visible, and a joint whose motion
-    /// shows on fewer (see `observed_parameters`) as not observed.
+    /// A link with fewer points than this is reported as not visible; a twin or a flip must
+    /// explain this many keypoints more to replace the fit.
     pub min_link_points: usize,
     /// A joint whose motion moves its points along their normals by less than this fraction of
     /// its reach per radian (RMS) is not constrained by the scan.
