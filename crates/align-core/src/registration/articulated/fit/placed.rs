@@ -189,9 +189,9 @@ impl<'a> Placed<'a> {
         if buried { -2 } else { 0 }
     }
 
-    /// [`Self::evidence`] graded by distance, from exact surface queries: `1 - (d / band)^2` for
-    /// a point `d` from the nearest surface of `links` (within `band` outside, `inside_m`
-    /// inside), -2 for a point buried deeper in one, 0 otherwise. A count within the band cannot
+    /// [`Self::evidence`] graded by distance, from exact surface queries: `1 - (d / r)^2` for a
+    /// point `d` from the nearest surface of `links` (within `band` outside, `inside_m` inside;
+    /// `r` the larger of the two), -2 for a point buried deeper in one, 0 otherwise. A count within the band cannot
     /// tell a wrist on its scan from one a few millimetres off that keeps most of its points
     /// within the band (the ABB IRB 1600's joint 5 in ray-cast scans: 57 points against 52-54,
     /// at 0.4 mm and 1.6 mm rms); the grade can. The distance grid blurs a millimetre, so the
