@@ -258,6 +258,15 @@ fn the_ur10_wrist_lost_in_trial_31_at_500_mm_is_found() {
     assert_trial_succeeds(ShippedRobot::Ur10, 0.5, 31);
 }
 
+/// Trial 33 of the UR10 at 500 mm (seed 2024) left wrist 2 at -6.28 rad against -1.57 and
+/// wrist 3 61 mm from its points. The wrist's sweep over a whole turn, centred on -6.28 and
+/// clamped at the joint's limit of -2 pi, never reached -1.57; the turn is now slid inside the
+/// limits.
+#[test]
+fn the_ur10_wrist_left_at_its_limit_in_trial_33_at_500_mm_is_found() {
+    assert_trial_succeeds(ShippedRobot::Ur10, 0.5, 33);
+}
+
 /// Trial 13 of the iiwa14 at 1000 mm settled on a copy of the arm with joints 1, 3 and 5 a
 /// half turn off, pinned at their 170 degree limits (so not an exact copy: link 7 was 0.2 m
 /// off); no single joint turned back explained the scan better, two together do.

@@ -41,8 +41,9 @@
 //!    half-turn states that were not kept give the `twin`, refined the same way before it is
 //!    called ambiguous.
 //! 6. The joints of the small links at the end of the chain (reaching at most 0.15 m from the
-//!    axis, with at most 1500 fine keypoints near them: a wrist and its flange) are swept
-//!    densely in a narrow band (`distal_sweep`), and everything is refined once more in a band
+//!    axis, with at most 1500 fine keypoints near them that no other link explains: a wrist and
+//!    its flange) are swept densely over a whole turn in a narrow band (`distal_sweep`), and
+//!    everything is refined once more in a band
 //!    of `polish_band_m` (5 mm), which the mixed pixels beside a small link's silhouette mostly
 //!    miss.
 //!

@@ -1,5 +1,7 @@
 //! Unit tests of the fit's stages on small robots of primitives and on the shipped UR10.
 
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
 use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::base::{round_base_axis, turned_towards};
@@ -7,6 +9,7 @@ use super::context::{FitContext, Keypoints};
 use super::joint_search::{SweptTubes, distinct_values, spread_scores};
 use super::placed::{Placed, placed_radius};
 use super::refine::normal_equations;
+use super::tree::Window;
 use super::{RobotFitOptions, align_robot};
 use crate::kinematics::{PackageMap, RobotModel};
 use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
@@ -360,9 +363,9 @@ fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart()
     let truth = Isometry3::translation(0.2, -0.1, 0.0);
     let q_true = vec![0.0, 0.3, 0.4, 0.2, 0.6, 0.3];
     let mut twin_q = q_true.clone();
-    twin_q[3] += std::f64::consts::PI;
+    twin_q[3] += PI;
     twin_q[4] = -twin_q[4];
-    twin_q[5] -= std::f64::consts::PI;
+    twin_q[5] -= PI;
     let twin_of = |key_size_m: f64| {
         with_keyed_wrist_scan(key_size_m, &truth, &q_true, true, |fit| {
             let body = fit.body;
@@ -436,9 +439,9 @@ fn a_flip_is_judged_on_the_links_its_joint_moves() {
         );
         // The wrist's twin on the true base.
         let mut twin_q = q_true.clone();
-        twin_q[3] += std::f64::consts::PI;
+        twin_q[3] += PI;
         twin_q[4] = -twin_q[4];
-        twin_q[5] -= std::f64::consts::PI;
+        twin_q[5] -= PI;
         let now = (&turned_base, q_turned.as_slice());
         let flipped = (&truth, twin_q.as_slice());
         let (on_all_now, on_all_flipped) = fit.contrast(now, flipped).unwrap();
@@ -548,4 +551,31 @@ fn closeness_grades_a_point_by_its_distance_where_evidence_only_counts_it() {
     assert_eq!(grade(0.004), 0.0);
     assert_eq!(grade(-0.05), -2.0);
     assert_eq!(placed.evidence(&at(-0.05), band, band, &[base]), -2);
+}
+
+#[test]
+fn a_whole_turn_near_a_limit_is_slid_inside_the_limits_not_clamped() {
+    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+    let q = ShippedRobot::Ur10.home();
+    let placed = Placed::new(&body, &Isometry3::identity(), &q);
+    // The UR10's wrist_2 joint turns +-2 pi.
+    let wrist_2 = 4;
+    let info = &body.parameters()[wrist_2];
+    assert_eq!(info.name, "wrist_2_joint");
+    assert!((info.lower + TAU).abs() < 1e-9 && (info.upper - TAU).abs() < 1e-9);
+    let window = Window::whole_turn(&body, &placed, wrist_2, 0.005).expect("a revolute joint");
+    let near_lower = -6.2811;
+    let grid = window.slid_grid(&body, near_lower, 100);
+    assert_eq!(grid.len(), 101);
+    assert_eq!(grid[0], info.lower);
+    assert!(
+        (grid[100] - (info.lower + TAU)).abs() < 1e-9,
+        "{}",
+        grid[100]
+    );
+    // The truth of the UR10's trial 33 at 500 mm, which centre +- pi clamped never reaches.
+    assert!(grid.iter().any(|v| (v + FRAC_PI_2).abs() < 0.04));
+    // Mid-range, the turn is centred on the value.
+    let centred = window.slid_grid(&body, 0.5, 100);
+    assert!((centred[0] - (0.5 - PI)).abs() < 1e-9 && (centred[100] - (0.5 + PI)).abs() < 1e-9);
 }

@@ -55,6 +55,26 @@ impl Window {
         ))
     }
 
+    /// A revolute parameter's whole turn: half a turn each way (the grid keeps to its limits).
+    /// None for a prismatic joint or one whose axis is not placed.
+    pub(super) fn whole_turn(
+        body: &ArticulatedBody,
+        placed: &Placed,
+        parameter: usize,
+        voxel_m: f64,
+    ) -> Option<Self> {
+        if body.parameters()[parameter].prismatic {
+            return None;
+        }
+        let axis = axis_of(body, &placed.poses, parameter)?;
+        let reach = reach_m(placed, &body.moved_by(parameter), &axis.origin).max(voxel_m);
+        Some(Self {
+            parameter,
+            half: std::f64::consts::PI,
+            reach_m: reach,
+        })
+    }
+
     pub(super) fn sweep_m(&self) -> f64 {
         self.half * self.reach_m
     }
@@ -72,6 +92,25 @@ impl Window {
         (0..=steps)
             .map(|i| (centre - half + i as f64 * step).clamp(info.lower, info.upper))
             .collect()
+    }
+
+    /// `steps + 1` values over a span of twice `half` about `centre`, slid inside the joint's
+    /// limits rather than clamped to them: a whole turn (`half` = pi) from a wrist near its
+    /// limit still covers every angle the joint can reach once (the UR10's wrist joints turn
+    /// +-2 pi; from -6.28, centre +- pi clamped would miss -1.57).
+    pub(super) fn slid_grid(&self, body: &ArticulatedBody, centre: f64, steps: usize) -> Vec<f64> {
+        let info = &body.parameters()[self.parameter];
+        let (mut lower, mut upper) = (centre - self.half, centre + self.half);
+        if lower < info.lower {
+            upper = (upper + info.lower - lower).min(info.upper);
+            lower = info.lower;
+        }
+        if upper > info.upper {
+            lower = (lower - (upper - info.upper)).max(info.lower);
+            upper = info.upper;
+        }
+        let step = (upper - lower) / steps as f64;
+        (0..=steps).map(|i| lower + i as f64 * step).collect()
     }
 }
 
