@@ -77,7 +77,7 @@ impl FitContext<'_> {
                 .filter(|l| body.links()[*l].surface.is_some() && !moved.contains(l))
                 .collect();
             // A turn moves a point by a chord: at most the diameter of its circle.
-            let reach = window.sweep_m().min(2.0 * window.reach_m) + band;
+            let reach = 2.0 * window.reach_m + band;
             let near: Vec<Point3<f64>> = scan
                 .fine
                 .iter()
