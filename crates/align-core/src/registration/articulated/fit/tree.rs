@@ -55,8 +55,8 @@ impl Window {
         ))
     }
 
-    /// A revolute parameter's whole turn: half a turn each way (the grid keeps to its limits).
-    /// None for a prismatic joint or one whose axis is not placed.
+    /// A revolute parameter's whole turn: half a turn each way ([`Self::slid_grid`] keeps it
+    /// inside the limits). None for a prismatic joint or one whose axis is not placed.
     pub(super) fn whole_turn(
         body: &ArticulatedBody,
         placed: &Placed,
@@ -66,12 +66,10 @@ impl Window {
         if body.parameters()[parameter].prismatic {
             return None;
         }
-        let axis = axis_of(body, &placed.poses, parameter)?;
-        let reach = reach_m(placed, &body.moved_by(parameter), &axis.origin).max(voxel_m);
+        let (window, _) = Self::new(body, placed, parameter, 0.0, voxel_m)?;
         Some(Self {
-            parameter,
             half: std::f64::consts::PI,
-            reach_m: reach,
+            ..window
         })
     }
 
