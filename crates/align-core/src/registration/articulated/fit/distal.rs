@@ -26,6 +26,18 @@ use super::tree::{Window, search_order};
 /// has points enough to pull it into place, and sweeping it would cost a fit's time.
 const SWEPT_POINTS_MAX: usize = 1500;
 
+/// The sweep's coarse pass steps this many narrow bands at the farthest point and grades in a
+/// band this many times as wide, on the distance grids; the fine pass then steps one band, from
+/// exact queries, about the coarse pass's best few peaks and the state.
+const COARSE_STEP_BANDS: f64 = 4.0;
+
+/// The coarse pass's peaks the fine pass searches about, besides the state.
+const FINE_CENTRES: usize = 3;
+
+/// How far the fine pass searches about each centre, in coarse steps each way: the coarse
+/// band's peak can sit a step or so from the narrow band's.
+const FINE_REACH_COARSE_STEPS: f64 = 2.0;
+
 /// A joint is swept only when its links reach at most this far from its axis, m: a wrist's
 /// (the ABB IRB 1600's joint 5 0.11 m, its flange 0.07 m), not a forearm's, whose links hold
 /// points enough for the refinement and whose sweep costs a fit's time.
@@ -102,10 +114,38 @@ impl FitContext<'_> {
                 trial[parameter] = value;
                 graded(world_from_root, &trial)
             };
+            let coarse_band = COARSE_STEP_BANDS * band;
+            let coarse_score = |value: f64| -> f64 {
+                let mut trial = q.clone();
+                trial[parameter] = value;
+                let at = Placed::new(body, world_from_root, &trial);
+                free.iter()
+                    .map(|p| at.closeness_blurred(p, coarse_band, coarse_band, &moved))
+                    .sum()
+            };
             let current = q[parameter];
+            // Steps that move the farthest point by the band, and the coarse pass's by its own.
             let step = band / window.reach_m;
-            let steps = ((2.0 * window.half / step).ceil() as usize).max(2);
-            let values = window.slid_grid(body, current, steps);
+            let coarse_step = COARSE_STEP_BANDS * step;
+            let (lower, upper) = window.slid_span(body, current);
+            let coarse_steps = (((upper - lower) / coarse_step).ceil() as usize).max(2);
+            let coarse_values = window.slid_grid(body, current, coarse_steps);
+            let coarse_scores: Vec<f64> = if options.parallel {
+                coarse_values.par_iter().map(|&v| coarse_score(v)).collect()
+            } else {
+                coarse_values.iter().map(|&v| coarse_score(v)).collect()
+            };
+            let reach_about = FINE_REACH_COARSE_STEPS * coarse_step;
+            let centres: Vec<f64> = highest_peaks(
+                &coarse_scores,
+                FINE_CENTRES,
+                FINE_REACH_COARSE_STEPS as usize,
+            )
+            .into_iter()
+            .map(|i| coarse_values[i])
+            .chain([current])
+            .collect();
+            let values = fine_values(&centres, reach_about, step, (lower, upper));
             let scores: Vec<f64> = if options.parallel {
                 values.par_iter().map(|&v| score(v)).collect()
             } else {
@@ -143,6 +183,56 @@ impl FitContext<'_> {
         }
         iterations
     }
+}
+
+/// The indices of the `count` highest local maxima of `scores`, no two within `apart` indices
+/// of each other (a plateau is one peak), highest first.
+pub(super) fn highest_peaks(scores: &[f64], count: usize, apart: usize) -> Vec<usize> {
+    let mut maxima: Vec<usize> = (0..scores.len())
+        .filter(|&i| {
+            let left = i.checked_sub(1).map_or(f64::NEG_INFINITY, |l| scores[l]);
+            let right = scores.get(i + 1).copied().unwrap_or(f64::NEG_INFINITY);
+            scores[i] >= left && scores[i] >= right
+        })
+        .collect();
+    maxima.sort_by(|&a, &b| scores[b].total_cmp(&scores[a]));
+    let mut peaks: Vec<usize> = Vec::with_capacity(count);
+    for index in maxima {
+        if peaks.len() == count {
+            break;
+        }
+        if peaks.iter().all(|&p| p.abs_diff(index) > apart) {
+            peaks.push(index);
+        }
+    }
+    peaks
+}
+
+/// Values `step` apart (or a little less) over `centre +- reach` for each of `centres`, inside
+/// `span`; overlapping intervals are merged, so no value is scored twice.
+pub(super) fn fine_values(centres: &[f64], reach: f64, step: f64, span: (f64, f64)) -> Vec<f64> {
+    let (lower, upper) = span;
+    let mut intervals: Vec<(f64, f64)> = centres
+        .iter()
+        .map(|&c| ((c - reach).max(lower), (c + reach).min(upper)))
+        .filter(|(a, b)| a <= b)
+        .collect();
+    intervals.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut merged: Vec<(f64, f64)> = Vec::with_capacity(intervals.len());
+    for (a, b) in intervals {
+        match merged.last_mut() {
+            Some(last) if a <= last.1 + step => last.1 = last.1.max(b),
+            _ => merged.push((a, b)),
+        }
+    }
+    merged
+        .into_iter()
+        .flat_map(|(a, b)| {
+            // Less a hair, so that rounding does not add a step to a whole number of them.
+            let steps = ((b - a) / step - 1e-9).ceil().max(1.0) as usize;
+            (0..=steps).map(move |i| a + (b - a) * i as f64 / steps as f64)
+        })
+        .collect()
 }
 
 /// How much more a swept value's graded score ([`Placed::closeness`]) must be than the

@@ -203,32 +203,71 @@ impl<'a> Placed<'a> {
         inside_m: f64,
         links: &[usize],
     ) -> f64 {
+        self.graded(point, band, inside_m, links, false)
+    }
+
+    /// [`Self::closeness`] from the links' distance grids where they answer as far as the band
+    /// (a millimetre of blur, tens of nanoseconds a query instead of a tree's descent): for a
+    /// band of a centimetre or more, where the blur is a tenth of it.
+    pub(super) fn closeness_blurred(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        links: &[usize],
+    ) -> f64 {
+        self.graded(point, band, inside_m, links, true)
+    }
+
+    fn graded(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        links: &[usize],
+        blurred: bool,
+    ) -> f64 {
         let mut best: Option<f64> = None;
         let mut buried = false;
         let reach = band.max(inside_m);
         for &link in links {
-            let Some(surface) = &self.body.links()[link].surface else {
+            let body_link = &self.body.links()[link];
+            let Some(surface) = &body_link.surface else {
                 continue;
             };
             if !self.within_reach(point, link, reach) {
                 continue;
             }
             let local = self.inverse[link] * point;
-            let (lower, upper) = surface.bounds();
-            if !(0..3).all(|a| local[a] >= lower[a] - reach && local[a] <= upper[a] + reach) {
-                continue;
-            }
-            match surface.closest_point_within(&local, reach) {
-                Some(closest)
-                    if closest.signed_distance >= -inside_m && closest.signed_distance <= band =>
-                {
-                    let off = closest.signed_distance.abs() / band.max(inside_m);
-                    let grade = 1.0 - off * off;
-                    best = Some(best.map_or(grade, |b: f64| b.max(grade)));
+            let grid = body_link
+                .grid
+                .as_ref()
+                .filter(|g| blurred && reach <= g.reliable_m());
+            let signed = if let Some(grid) = grid {
+                // Outside the grid: farther than its margin, and outside the solid.
+                let Some(signed) = grid.signed_distance_m(&local) else {
+                    continue;
+                };
+                signed
+            } else {
+                let (lower, upper) = surface.bounds();
+                if !(0..3).all(|a| local[a] >= lower[a] - reach && local[a] <= upper[a] + reach) {
+                    continue;
                 }
-                Some(closest) if closest.signed_distance < -inside_m => buried = true,
-                Some(_) => {}
-                None => buried |= deep_inside(surface, &local, inside_m),
+                match surface.closest_point_within(&local, reach) {
+                    Some(closest) => closest.signed_distance,
+                    None => {
+                        buried |= deep_inside(surface, &local, inside_m);
+                        continue;
+                    }
+                }
+            };
+            if (-inside_m..=band).contains(&signed) {
+                let off = signed.abs() / reach;
+                let grade = 1.0 - off * off;
+                best = Some(best.map_or(grade, |b: f64| b.max(grade)));
+            } else if signed < -inside_m {
+                buried = true;
             }
         }
         match best {

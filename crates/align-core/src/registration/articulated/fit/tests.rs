@@ -6,6 +6,7 @@ use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3
 
 use super::base::{round_base_axis, turned_towards};
 use super::context::{FitContext, Keypoints};
+use super::distal::{fine_values, highest_peaks};
 use super::joint_search::{SweptTubes, distinct_values, spread_scores};
 use super::placed::{Placed, placed_radius};
 use super::refine::normal_equations;
@@ -578,4 +579,58 @@ fn a_whole_turn_near_a_limit_is_slid_inside_the_limits_not_clamped() {
     // Mid-range, the turn is centred on the value.
     let centred = window.slid_grid(&body, 0.5, 100);
     assert!((centred[0] - (0.5 - PI)).abs() < 1e-9 && (centred[100] - (0.5 + PI)).abs() < 1e-9);
+}
+
+#[test]
+fn the_blurred_grade_from_the_grids_agrees_with_the_exact_one_on_a_face() {
+    let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
+    let body = ArticulatedBody::from_model(&model).unwrap();
+    let base = (0..body.links().len())
+        .find(|&l| body.links()[l].name == "base")
+        .unwrap();
+    assert!(body.links()[base].grid.is_some());
+    let placed = Placed::new(&body, &Isometry3::identity(), &[0.0; 6]);
+    // The sweep's coarse band: four narrow bands of 3 mm.
+    let band = 0.012;
+    let at = |off_m: f64| Point3::new(0.2 + off_m, 0.05, 0.1);
+    for off_m in [0.0, 0.004, -0.006, 0.0115, 0.015, -0.05] {
+        let exact = placed.closeness(&at(off_m), band, band, &[base]);
+        let blurred = placed.closeness_blurred(&at(off_m), band, band, &[base]);
+        assert!(
+            (exact - blurred).abs() < 0.01,
+            "{off_m} m: {exact} exact, {blurred} blurred"
+        );
+    }
+    assert_eq!(
+        placed.closeness_blurred(&at(0.015), band, band, &[base]),
+        0.0
+    );
+    assert_eq!(
+        placed.closeness_blurred(&at(-0.05), band, band, &[base]),
+        -2.0
+    );
+}
+
+#[test]
+fn the_sweeps_fine_pass_searches_about_the_highest_distinct_peaks_once_each() {
+    // Maxima at 1 (3), the plateau 3-4 (5) and 7 (6): the plateau is one peak, and the peak at
+    // 1 lies within two values of it.
+    let scores = [1.0, 3.0, 2.0, 5.0, 5.0, 4.0, 0.0, 6.0, 1.0];
+    assert_eq!(highest_peaks(&scores, 3, 2), vec![7, 3]);
+    assert_eq!(highest_peaks(&scores, 3, 1), vec![7, 3, 1]);
+    assert_eq!(highest_peaks(&scores, 1, 2), vec![7]);
+    // Overlapping intervals are merged and cut at the span's ends.
+    let values = fine_values(&[0.0, 0.1, 1.0], 0.1, 0.05, (-0.05, 2.0));
+    assert!(values.windows(2).all(|w| w[0] < w[1]), "{values:?}");
+    assert!((values[0] + 0.05).abs() < 1e-12);
+    let first: Vec<&f64> = values.iter().filter(|&&v| v < 0.5).collect();
+    let second: Vec<&f64> = values.iter().filter(|&&v| v > 0.5).collect();
+    assert_eq!((first.len(), second.len()), (6, 5), "{values:?}");
+    assert!((*first[5] - 0.2).abs() < 1e-12 && (*second[0] - 0.9).abs() < 1e-12);
+    assert!(
+        values
+            .windows(2)
+            .filter(|w| w[1] - w[0] < 0.5)
+            .all(|w| w[1] - w[0] <= 0.05 + 1e-12)
+    );
 }

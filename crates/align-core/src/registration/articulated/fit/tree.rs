@@ -92,11 +92,18 @@ impl Window {
             .collect()
     }
 
-    /// `steps + 1` values over a span of twice `half` about `centre`, slid inside the joint's
-    /// limits rather than clamped to them: a whole turn (`half` = pi) from a wrist near its
-    /// limit still covers every angle the joint can reach once (the UR10's wrist joints turn
-    /// +-2 pi; from -6.28, centre +- pi clamped would miss -1.57).
+    /// `steps + 1` values over [`Self::slid_span`] about `centre`.
     pub(super) fn slid_grid(&self, body: &ArticulatedBody, centre: f64, steps: usize) -> Vec<f64> {
+        let (lower, upper) = self.slid_span(body, centre);
+        let step = (upper - lower) / steps as f64;
+        (0..=steps).map(|i| lower + i as f64 * step).collect()
+    }
+
+    /// A span of twice `half` about `centre`, slid inside the joint's limits rather than
+    /// clamped to them (no longer than the limits allow): a whole turn (`half` = pi) from a
+    /// wrist near its limit still covers every angle the joint can reach once (the UR10's wrist
+    /// joints turn +-2 pi; from -6.28, centre +- pi clamped would miss -1.57).
+    pub(super) fn slid_span(&self, body: &ArticulatedBody, centre: f64) -> (f64, f64) {
         let info = &body.parameters()[self.parameter];
         let (mut lower, mut upper) = (centre - self.half, centre + self.half);
         if lower < info.lower {
@@ -107,8 +114,7 @@ impl Window {
             lower = (lower - (upper - info.upper)).max(info.lower);
             upper = info.upper;
         }
-        let step = (upper - lower) / steps as f64;
-        (0..=steps).map(|i| lower + i as f64 * step).collect()
+        (lower, upper)
     }
 }
 
