@@ -42,8 +42,9 @@
 //!    called ambiguous.
 //! 6. The joints of the small links at the end of the chain (reaching at most 0.15 m from the
 //!    axis, with at most 1500 fine keypoints near them that no other link explains: a wrist and
-//!    its flange) are swept densely over a whole turn in a narrow band (`distal_sweep`), and
-//!    everything is refined once more in a band
+//!    its flange) are swept over a whole turn, coarse on the distance grids and then densely in
+//!    a narrow band about the coarse peaks (`distal_sweep`), and everything is refined once
+//!    more in a band
 //!    of `polish_band_m` (5 mm), which the mixed pixels beside a small link's silhouette mostly
 //!    miss.
 //!
