@@ -16,7 +16,7 @@ use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
 use super::context::FitContext;
-use super::placed::Placed;
+use super::placed::{Distances, Placed};
 use super::refine::refine;
 use super::report::{FinalState, final_state};
 use super::tree::{Window, search_order};
@@ -112,7 +112,7 @@ impl FitContext<'_> {
             let graded = |root: &Isometry3<f64>, joints: &[f64]| -> f64 {
                 let at = Placed::new(body, root, joints);
                 free.iter()
-                    .map(|p| at.closeness(p, band, band, &moved))
+                    .map(|p| at.closeness(p, band, band, &moved, Distances::Exact))
                     .sum()
             };
             let score = |value: f64| -> f64 {
@@ -126,7 +126,7 @@ impl FitContext<'_> {
                 trial[parameter] = value;
                 let at = Placed::new(body, world_from_root, &trial);
                 free.iter()
-                    .map(|p| at.closeness_blurred(p, coarse_band, coarse_band, &moved))
+                    .map(|p| at.closeness(p, coarse_band, coarse_band, &moved, Distances::Grids))
                     .sum()
             };
             let current = q[parameter];

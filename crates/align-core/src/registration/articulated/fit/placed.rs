@@ -17,6 +17,16 @@ pub(super) struct Match {
     pub(super) link: usize,
 }
 
+/// Where [`Placed::closeness`] takes its distances from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Distances {
+    /// The link meshes' exact closest points.
+    Exact,
+    /// The links' distance grids where they answer as far as the band (a millimetre of blur),
+    /// the meshes elsewhere.
+    Grids,
+}
+
 /// Link surfaces placed in the world, with their bounds, ready for point queries.
 pub(super) struct Placed<'a> {
     pub(super) body: &'a ArticulatedBody,
@@ -189,43 +199,22 @@ impl<'a> Placed<'a> {
         if buried { -2 } else { 0 }
     }
 
-    /// [`Self::evidence`] graded by distance, from exact surface queries: `1 - (d / r)^2` for a
-    /// point `d` from the nearest surface of `links` (within `band` outside, `inside_m` inside;
-    /// `r` the larger of the two), -2 for a point buried deeper in one, 0 otherwise. A count within the band cannot
+    /// [`Self::evidence`] graded by distance: `1 - (d / r)^2` for a point `d` from the nearest
+    /// surface of `links` (within `band` outside, `inside_m` inside; `r` the larger of the
+    /// two), -2 for a point buried deeper in one, 0 otherwise. A count within the band cannot
     /// tell a wrist on its scan from one a few millimetres off that keeps most of its points
     /// within the band (the ABB IRB 1600's joint 5 in ray-cast scans: 57 points against 52-54,
-    /// at 0.4 mm and 1.6 mm rms); the grade can. The distance grid blurs a millimetre, so the
-    /// queries go to the meshes.
+    /// at 0.4 mm and 1.6 mm rms); the grade can. The distance grid blurs a millimetre, so in
+    /// a narrow band the distances come from the meshes ([`Distances::Exact`]); for a band of a
+    /// centimetre or more, where the blur is a tenth of it, the grids answer in tens of
+    /// nanoseconds instead of a tree's descent ([`Distances::Grids`], where they reach).
     pub(super) fn closeness(
         &self,
         point: &Point3<f64>,
         band: f64,
         inside_m: f64,
         links: &[usize],
-    ) -> f64 {
-        self.graded(point, band, inside_m, links, false)
-    }
-
-    /// [`Self::closeness`] from the links' distance grids where they answer as far as the band
-    /// (a millimetre of blur, tens of nanoseconds a query instead of a tree's descent): for a
-    /// band of a centimetre or more, where the blur is a tenth of it.
-    pub(super) fn closeness_blurred(
-        &self,
-        point: &Point3<f64>,
-        band: f64,
-        inside_m: f64,
-        links: &[usize],
-    ) -> f64 {
-        self.graded(point, band, inside_m, links, true)
-    }
-
-    fn graded(
-        &self,
-        point: &Point3<f64>,
-        band: f64,
-        inside_m: f64,
-        links: &[usize],
-        blurred: bool,
+        distances: Distances,
     ) -> f64 {
         let mut best: Option<f64> = None;
         let mut buried = false;
@@ -242,7 +231,7 @@ impl<'a> Placed<'a> {
             let grid = body_link
                 .grid
                 .as_ref()
-                .filter(|g| blurred && reach <= g.reliable_m());
+                .filter(|g| distances == Distances::Grids && reach <= g.reliable_m());
             let signed = if let Some(grid) = grid {
                 // Outside the grid: farther than its margin, and outside the solid.
                 let Some(signed) = grid.signed_distance_m(&local) else {

@@ -8,7 +8,7 @@ use super::base::{round_base_axis, turned_towards};
 use super::context::{FitContext, Keypoints};
 use super::distal::{fine_values, highest_peaks};
 use super::joint_search::{SweptTubes, distinct_values, spread_scores};
-use super::placed::{Placed, placed_radius};
+use super::placed::{Distances, Placed, placed_radius};
 use super::refine::normal_equations;
 use super::tree::Window;
 use super::{RobotFitOptions, align_robot};
@@ -521,19 +521,25 @@ fn a_point_outside_the_swept_tubes_counts_nothing_at_any_value() {
     }
 }
 
-#[test]
-fn closeness_grades_a_point_by_its_distance_where_evidence_only_counts_it() {
+/// The forked-wrist robot and the index of its base link (a 0.4 m box from z = 0 to 0.3).
+fn forked_wrist_and_its_base() -> (ArticulatedBody, usize) {
     let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
     let body = ArticulatedBody::from_model(&model).unwrap();
     let base = (0..body.links().len())
         .find(|&l| body.links()[l].name == "base")
         .unwrap();
+    (body, base)
+}
+
+#[test]
+fn closeness_grades_a_point_by_its_distance_where_evidence_only_counts_it() {
+    let (body, base) = forked_wrist_and_its_base();
     let placed = Placed::new(&body, &Isometry3::identity(), &[0.0; 6]);
     let band = 0.003;
     // The base is a 0.4 m box from z = 0 to 0.3: its face x = 0.2, off it by `off_m` (negative
     // inside).
     let at = |off_m: f64| Point3::new(0.2 + off_m, 0.05, 0.1);
-    let grade = |off_m: f64| placed.closeness(&at(off_m), band, band, &[base]);
+    let grade = |off_m: f64| placed.closeness(&at(off_m), band, band, &[base], Distances::Exact);
     for (off_m, expected) in [
         (0.0, 1.0),
         (0.0015, 0.75),
@@ -583,30 +589,26 @@ fn a_whole_turn_near_a_limit_is_slid_inside_the_limits_not_clamped() {
 
 #[test]
 fn the_blurred_grade_from_the_grids_agrees_with_the_exact_one_on_a_face() {
-    let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
-    let body = ArticulatedBody::from_model(&model).unwrap();
-    let base = (0..body.links().len())
-        .find(|&l| body.links()[l].name == "base")
-        .unwrap();
+    let (body, base) = forked_wrist_and_its_base();
     assert!(body.links()[base].grid.is_some());
     let placed = Placed::new(&body, &Isometry3::identity(), &[0.0; 6]);
     // The sweep's coarse band: four narrow bands of 3 mm.
     let band = 0.012;
     let at = |off_m: f64| Point3::new(0.2 + off_m, 0.05, 0.1);
     for off_m in [0.0, 0.004, -0.006, 0.0115, 0.015, -0.05] {
-        let exact = placed.closeness(&at(off_m), band, band, &[base]);
-        let blurred = placed.closeness_blurred(&at(off_m), band, band, &[base]);
+        let exact = placed.closeness(&at(off_m), band, band, &[base], Distances::Exact);
+        let blurred = placed.closeness(&at(off_m), band, band, &[base], Distances::Grids);
         assert!(
             (exact - blurred).abs() < 0.01,
             "{off_m} m: {exact} exact, {blurred} blurred"
         );
     }
     assert_eq!(
-        placed.closeness_blurred(&at(0.015), band, band, &[base]),
+        placed.closeness(&at(0.015), band, band, &[base], Distances::Grids),
         0.0
     );
     assert_eq!(
-        placed.closeness_blurred(&at(-0.05), band, band, &[base]),
+        placed.closeness(&at(-0.05), band, band, &[base], Distances::Grids),
         -2.0
     );
 }
