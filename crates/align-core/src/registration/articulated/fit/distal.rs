@@ -28,7 +28,7 @@ const SWEPT_POINTS_MAX: usize = 1500;
 
 /// The sweep's coarse pass steps this many narrow bands at the farthest point and grades in a
 /// band this many times as wide, on the distance grids; the fine pass then steps one band, from
-/// exact queries, about the coarse pass's best few peaks and the state.
+/// exact queries, about the coarse values near its best, its best few peaks and the state.
 const COARSE_STEP_BANDS: f64 = 4.0;
 
 /// The coarse pass's peaks the fine pass searches about, besides the state.
@@ -50,8 +50,9 @@ impl FitContext<'_> {
     /// most [`SWEPT_POINTS_MAX`] of them, each graded by its distance within a band
     /// ([`Placed::closeness`]). Coarse to fine: the whole turn in steps that move the farthest
     /// point by [`COARSE_STEP_BANDS`] narrow bands (half a keypoint voxel each), graded in a band
-    /// as wide on the distance grids; then, about the best [`FINE_CENTRES`] peaks of that and
-    /// the state, steps of one narrow band graded in it from exact queries. The best value,
+    /// as wide on the distance grids; then steps of one narrow band graded in it from exact
+    /// queries, about every coarse value within the coarse scores' noise of their best, the
+    /// best [`FINE_CENTRES`] coarse peaks and the state. The best value,
     /// when it scores above the state by [`sweep_gain_needed`], is refined and kept when it
     /// still scores that much more on the same keypoints. Returns the iterations spent.
     ///
