@@ -57,7 +57,7 @@ impl FitContext<'_> {
     /// still scores that much more on the same keypoints. Returns the iterations spent.
     ///
     /// Coarse to fine because the whole turn in narrow steps from exact queries cost the UR10's
-    /// fit at 100 mm about a third more time (its two wrist joints: 260 and 150 values on 460
+    /// fit at 100 mm a third to a half more time (its two wrist joints: 260 and 150 values on 460
     /// and 145 points).
     ///
     /// A whole turn, not a window about the state: the searches can leave a wrist folded the
