@@ -110,26 +110,22 @@ impl FitContext<'_> {
             if free.is_empty() || free.len() > SWEPT_POINTS_MAX {
                 continue;
             }
-            let graded = |root: &Isometry3<f64>, joints: &[f64]| -> f64 {
-                let at = Placed::new(body, root, joints);
-                free.iter()
-                    .map(|p| at.closeness(p, band, band, &moved, Distances::Exact))
-                    .sum()
-            };
-            let score = |value: f64| -> f64 {
+            // The free points' grades in `band`, with the links at `root` and `joints`.
+            let graded_in =
+                |root: &Isometry3<f64>, joints: &[f64], band: f64, distances: Distances| -> f64 {
+                    let at = Placed::new(body, root, joints);
+                    free.iter()
+                        .map(|p| at.closeness(p, band, band, &moved, distances))
+                        .sum()
+                };
+            let graded_at = |value: f64, band: f64, distances: Distances| -> f64 {
                 let mut trial = q.clone();
                 trial[parameter] = value;
-                graded(world_from_root, &trial)
+                graded_in(world_from_root, &trial, band, distances)
             };
+            let score = |value: f64| graded_at(value, band, Distances::Exact);
             let coarse_band = COARSE_STEP_BANDS * band;
-            let coarse_score = |value: f64| -> f64 {
-                let mut trial = q.clone();
-                trial[parameter] = value;
-                let at = Placed::new(body, world_from_root, &trial);
-                free.iter()
-                    .map(|p| at.closeness(p, coarse_band, coarse_band, &moved, Distances::Grids))
-                    .sum()
-            };
+            let coarse_score = |value: f64| graded_at(value, coarse_band, Distances::Grids);
             let current = q[parameter];
             // Steps that move the farthest point by the band, and the coarse pass's by its own.
             let step = band / window.reach_m;
@@ -195,7 +191,8 @@ impl FitContext<'_> {
                 true,
             );
             // `here` is the state's own score: the sweep's value at the current one.
-            let explains_more = graded(&trial_root, &trial_q) - here >= sweep_gain_needed(here);
+            let explains_more = graded_in(&trial_root, &trial_q, band, Distances::Exact) - here
+                >= sweep_gain_needed(here);
             if explains_more {
                 *state = final_state(body, scan.fine, &trial_root, &trial_q, options);
                 *world_from_root = trial_root;
