@@ -89,7 +89,10 @@ impl FitContext<'_> {
     /// not (points buried inside a link count against it), searching a window that `delta_m`
     /// allows around the current value (coarse grid, then a finer one around each of the best
     /// `count` local maxima), best first. A joint that spins its own links in place is searched
-    /// together with the next joint, whose links are the only ones that show its value.
+    /// together with the next joint, whose links are the only ones that show its value; except
+    /// from a near start (see [`FitContext::near`]), where it keeps its value (its scores are
+    /// flat, and ties go to the current value) and the refinements after the next joint's search
+    /// settle it from the links that show it.
     pub(super) fn joint_candidates(
         &self,
         world_from_root: &Isometry3<f64>,
@@ -155,13 +158,19 @@ impl FitContext<'_> {
         if nearby.is_empty() {
             return Vec::new();
         }
-        let partner = if spins_in_place(body, &placed, parameter, options.min_observability) {
-            child_parameter(body, parameter).and_then(|child| {
-                Window::new(body, &placed, child, delta_m, options.voxel_m).map(|(w, _)| w)
-            })
-        } else {
-            None
-        };
+        // From a near start the joint is within its refinement's basin: its error moves the next
+        // joint's links by at most delta, and the settling after the next joint's search (and
+        // every refinement after it) takes it from there. The search together with the next
+        // joint tries every pair of the two grids (216 placements on the UR10's first joint and
+        // both its wrist joints), the most costly search of a fit at 100 mm.
+        let partner =
+            if !self.near && spins_in_place(body, &placed, parameter, options.min_observability) {
+                child_parameter(body, parameter).and_then(|child| {
+                    Window::new(body, &placed, child, delta_m, options.voxel_m).map(|(w, _)| w)
+                })
+            } else {
+                None
+            };
         // The coarse level only has to find the right basin: a sample of the points does.
         let stride = nearby.len().div_ceil(COARSE_SEARCH_POINTS);
         let sample: Vec<(Point3<f64>, f64)> = nearby.iter().step_by(stride).copied().collect();
