@@ -4,6 +4,7 @@
 //! place).
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use rayon::prelude::*;
 
 use super::RobotFitOptions;
 use super::context::FitContext;
@@ -191,10 +192,21 @@ impl FitContext<'_> {
         let order = search_order(body);
         let mut iterations = 0;
         let mut runners_up: Vec<(i64, usize, Isometry3<f64>, Vec<f64>)> = Vec::new();
-        let flip = |base: &Isometry3<f64>, q: &[f64], index: usize, iterations: &mut usize| {
-            let (trial_base, trial_q, spent) = self.flipped(base, q, &order, index)?;
-            *iterations += spent;
-            Some((score(&trial_base, &trial_q), trial_base, trial_q))
+        // The flips of `indices` from one state, each scored, with the iterations it spent.
+        // Side by side: a flip is a search and a refinement that leave part of the second core
+        // idle, and the flips from one state do not depend on each other.
+        type Flipped = Option<(i64, Isometry3<f64>, Vec<f64>, usize)>;
+        let flips = |base: &Isometry3<f64>, q: &[f64], indices: std::ops::Range<usize>| {
+            let flip = |index: usize| -> Flipped {
+                let (trial_base, trial_q, spent) = self.flipped(base, q, &order, index)?;
+                Some((score(&trial_base, &trial_q), trial_base, trial_q, spent))
+            };
+            let flipped: Vec<Flipped> = if options.parallel {
+                indices.clone().into_par_iter().map(flip).collect()
+            } else {
+                indices.clone().map(flip).collect()
+            };
+            indices.zip(flipped)
         };
         let mut left: Vec<OwnedState> = Vec::new();
         // A flip replaces the state when it explains more where the two differ on the links the
@@ -210,23 +222,31 @@ impl FitContext<'_> {
         // reaches the true pose.
         for round in 0..FLIP_ROUNDS {
             let mut kept = false;
-            for index in 0..order.len() {
-                let Some((trial_score, trial_base, trial_q)) =
-                    flip(world_from_root, q, index, &mut iterations)
-                else {
-                    continue;
-                };
-                if better(index, (&trial_base, &trial_q), (world_from_root, q)) {
-                    left.push((*world_from_root, q.clone()));
-                    *q = trial_q;
-                    *world_from_root = trial_base;
-                    kept = true;
-                } else {
+            // The joints are tried in order, each from the state the ones before it left: the
+            // flips after a kept one are made again from the new state (the ones made from the
+            // old state, side by side with it, are dropped unseen, their iterations uncounted).
+            let mut first = 0;
+            while first < order.len() {
+                let mut next = order.len();
+                for (index, flipped) in flips(world_from_root, q, first..order.len()) {
+                    let Some((trial_score, trial_base, trial_q, spent)) = flipped else {
+                        continue;
+                    };
+                    iterations += spent;
+                    if better(index, (&trial_base, &trial_q), (world_from_root, q)) {
+                        left.push((*world_from_root, q.clone()));
+                        *q = trial_q;
+                        *world_from_root = trial_base;
+                        kept = true;
+                        next = index + 1;
+                        break;
+                    }
                     left.push((trial_base, trial_q.clone()));
                     if global && round == 0 {
                         runners_up.push((trial_score, index, trial_base, trial_q));
                     }
                 }
+                first = next;
             }
             if !kept {
                 break;
@@ -235,11 +255,11 @@ impl FitContext<'_> {
         runners_up.sort_by_key(|(trial_score, ..)| std::cmp::Reverse(*trial_score));
         runners_up.truncate(FLIP_RUNNERS_UP);
         for (_, first, base, first_q) in runners_up {
-            for second in first + 1..order.len() {
-                let Some((_, trial_base, trial_q)) = flip(&base, &first_q, second, &mut iterations)
-                else {
+            for (_, flipped) in flips(&base, &first_q, first + 1..order.len()) {
+                let Some((_, trial_base, trial_q, spent)) = flipped else {
                     continue;
                 };
+                iterations += spent;
                 if better(first, (&trial_base, &trial_q), (world_from_root, q)) {
                     left.push((*world_from_root, q.clone()));
                     *q = trial_q;
