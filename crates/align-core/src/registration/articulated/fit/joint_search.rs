@@ -90,9 +90,9 @@ impl FitContext<'_> {
     /// allows around the current value (coarse grid, then a finer one around each of the best
     /// `count` local maxima), best first. A joint that spins its own links in place is searched
     /// together with the next joint, whose links are the only ones that show its value; except
-    /// from a near start (see [`FitContext::near`]), where it keeps its value (its scores are
-    /// flat, and ties go to the current value) and the refinements after the next joint's search
-    /// settle it from the links that show it.
+    /// from a near start (see [`FitContext::near`]), where it keeps its value (the only
+    /// candidate) and the refinements after the next joint's search settle it from the links
+    /// that show it.
     pub(super) fn joint_candidates(
         &self,
         world_from_root: &Isometry3<f64>,
@@ -114,6 +114,22 @@ impl FitContext<'_> {
         else {
             return Vec::new();
         };
+        // From a near start a joint that spins its own links in place keeps its value: alone its
+        // scores are flat (the beam followed two states a coarse step apart that the settling
+        // made one), and its error moves the next joint's links by at most delta, within the
+        // refinements' basin: the settling after the next joint's search (and every refinement
+        // after it) takes it from there. The search together with the next joint, which far
+        // starts need, tries every pair of the two grids (216 placements on the UR10's first
+        // joint and both its wrist joints), the most costly search of a fit at 100 mm.
+        let spins = spins_in_place(body, &placed, parameter, options.min_observability);
+        if self.near && spins {
+            return vec![Candidate {
+                value: q[parameter],
+                partner: None,
+                deferred: None,
+                score: 0,
+            }];
+        }
         let others: Vec<usize> = (0..body.links().len())
             .filter(|link| !moved.contains(link))
             .collect();
@@ -158,19 +174,13 @@ impl FitContext<'_> {
         if nearby.is_empty() {
             return Vec::new();
         }
-        // From a near start the joint is within its refinement's basin: its error moves the next
-        // joint's links by at most delta, and the settling after the next joint's search (and
-        // every refinement after it) takes it from there. The search together with the next
-        // joint tries every pair of the two grids (216 placements on the UR10's first joint and
-        // both its wrist joints), the most costly search of a fit at 100 mm.
-        let partner =
-            if !self.near && spins_in_place(body, &placed, parameter, options.min_observability) {
-                child_parameter(body, parameter).and_then(|child| {
-                    Window::new(body, &placed, child, delta_m, options.voxel_m).map(|(w, _)| w)
-                })
-            } else {
-                None
-            };
+        let partner = if spins {
+            child_parameter(body, parameter).and_then(|child| {
+                Window::new(body, &placed, child, delta_m, options.voxel_m).map(|(w, _)| w)
+            })
+        } else {
+            None
+        };
         // The coarse level only has to find the right basin: a sample of the points does.
         let stride = nearby.len().div_ceil(COARSE_SEARCH_POINTS);
         let sample: Vec<(Point3<f64>, f64)> = nearby.iter().step_by(stride).copied().collect();
