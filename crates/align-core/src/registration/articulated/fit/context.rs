@@ -28,8 +28,9 @@ pub(super) struct FitContext<'a> {
     /// detected and each joint is searched with its child over its whole window.
     pub(super) global: bool,
     /// The start is near (delta at most 0.18 of the robot's radius, see
-    /// `NEAR_DELTA_PER_RADIUS`): the searches from it settle every joint in its basin, and the
-    /// beam search keeps fewer states.
+    /// `NEAR_DELTA_PER_RADIUS`): the searches from it settle every joint in its basin, the
+    /// beam search keeps fewer states, and a joint that spins its own links in place keeps its
+    /// value.
     pub(super) near: bool,
     pub(super) options: &'a RobotFitOptions,
 }

@@ -51,7 +51,9 @@
 //! When delta is at most 0.18 of the robot's radius (at the start joints) the start is near:
 //! the searches from it settle every joint in its basin, so the beam keeps `near_beam_width`
 //! states and follows two values of a joint from each, the joints are searched
-//! `near_search_passes` times, and there is no second look. The rigid alignment of the whole
+//! `near_search_passes` times, a joint that spins its own links in place keeps its value for
+//! the refinements to settle (it is not searched with the next joint), and there is no second
+//! look. The rigid alignment of the whole
 //! robot ends with its exploration's run (coarse keypoints, down to its narrowest band) rather
 //! than running again on the fine keypoints (`PcaOptions::fine_run`): with the joints still
 //! wrong it cannot come closer, and the searches settle the base with them.
