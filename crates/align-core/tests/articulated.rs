@@ -130,9 +130,9 @@ fn joint_bounds(body: &ArticulatedBody, q: &[f64], delta_m: f64) -> Vec<f64> {
 
 /// Near starts (100 mm, under a fifth of both robots' radii) at corners of the box the trials
 /// draw joint starts from: every joint off by the most the start allows, the base where it is.
-/// From a near start a joint that spins its own links in place (both robots' first joints, the
-/// UR10's first two wrist joints, the iiwa's odd joints) is not searched with the next joint:
-/// the refinements after the next joint's search settle it, from as far as a start puts it.
+/// From a near start a joint that spins its own links in place (the UR10's first joint and its
+/// first two wrist joints among them) keeps its value: the refinements after the next joint's
+/// search settle it, from as far as a start puts it.
 #[test]
 fn near_starts_at_the_corners_of_the_joint_box_recover_every_visible_link() {
     let delta_m = 0.1;

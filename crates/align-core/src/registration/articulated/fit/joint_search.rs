@@ -120,7 +120,7 @@ impl FitContext<'_> {
         // refinements' basin: the settling after the next joint's search (and every refinement
         // after it) takes it from there. The search together with the next joint, which far
         // starts need, tries every pair of the two grids (216 placements on the UR10's first
-        // joint and both its wrist joints), the most costly search of a fit at 100 mm.
+        // joint and its first two wrist joints), the most costly search of a fit at 100 mm.
         let spins = spins_in_place(body, &placed, parameter, options.min_observability);
         if self.near && spins {
             return vec![Candidate {
