@@ -7,7 +7,8 @@ use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
 use align_core::trials::robot_scan::{RobotScanOptions, scan_robot};
 use align_core::trials::robot_trials::{
-    Methods, RobotScene, RobotTrialRow, perturb_robot, run_robot_trials, surface_deviation_m,
+    Methods, RobotScene, RobotTrialRow, joint_start_bounds, perturb_robot, run_robot_trials,
+    surface_deviation_m,
 };
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
@@ -104,30 +105,6 @@ fn ur10_recovers_from_a_small_perturbation_in_a_cluttered_scan() {
     assert!(worst < 1e-3, "{report:?}");
 }
 
-/// The most a start at `delta_m` moves each joint ([`perturb_robot`]'s bound): a turn that moves
-/// the farthest surface point of the links it moves by delta (delta itself when prismatic).
-fn joint_bounds(body: &ArticulatedBody, q: &[f64], delta_m: f64) -> Vec<f64> {
-    let poses = body.link_poses(&cell_pose(), q);
-    (0..q.len())
-        .map(|parameter| {
-            if body.parameters()[parameter].prismatic {
-                return delta_m;
-            }
-            let moved = body.moved_by(parameter);
-            let origin = poses[moved[0]] * nalgebra::Point3::origin();
-            let reach_m = moved
-                .iter()
-                .filter_map(|&link| Some((link, body.links()[link].surface.as_ref()?)))
-                .flat_map(|(link, mesh)| {
-                    let pose = poses[link];
-                    mesh.vertices().map(move |v| (pose * v - origin).norm())
-                })
-                .fold(0.05, f64::max);
-            (delta_m / reach_m).min(std::f64::consts::PI)
-        })
-        .collect()
-}
-
 /// Near starts (100 mm, under a fifth of both robots' radii) at corners of the box the trials
 /// draw joint starts from: every joint off by the most the start allows, the base where it is.
 /// From a near start a joint that spins its own links in place (the UR10's first joint and its
@@ -141,7 +118,7 @@ fn near_starts_at_the_corners_of_the_joint_box_recover_every_visible_link() {
             .expect("shipped robot has surfaces");
         let truth = robot.home();
         let cloud = scan_robot(&body, &cell_pose(), &truth, &RobotScanOptions::default());
-        let bounds = joint_bounds(&body, &truth, delta_m);
+        let bounds = joint_start_bounds(&body, &cell_pose(), &truth, delta_m);
         for (corner, signs) in [[1.0, 1.0], [1.0, -1.0]].iter().enumerate() {
             let q0: Vec<f64> = truth
                 .iter()

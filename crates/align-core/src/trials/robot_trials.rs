@@ -50,8 +50,6 @@ pub fn perturb_robot(
     delta_m: f64,
     rng: &mut TrialRng,
 ) -> (Isometry3<f64>, Vec<f64>) {
-    let poses = body.link_poses(world_from_root, q);
-    let root = world_from_root * Point3::origin();
     let displacement = random_displacement(rng, delta_m, 1.0);
     let base = match body.rigid_mesh(q) {
         Some(mesh) => {
@@ -66,19 +64,36 @@ pub fn perturb_robot(
         None => world_from_root * displacement,
     };
     let mut start = q.to_vec();
-    for (parameter, value) in start.iter_mut().enumerate() {
+    let bounds = joint_start_bounds(body, world_from_root, q, delta_m);
+    for ((parameter, value), bound) in start.iter_mut().enumerate().zip(bounds) {
         let info = &body.parameters()[parameter];
-        let moved = body.moved_by(parameter);
-        let origin = moved.first().map_or(root, |&l| poses[l] * Point3::origin());
-        let bound = if info.prismatic {
-            delta_m
-        } else {
-            (delta_m / reach_from(body, &poses, &moved, &origin).max(0.05))
-                .min(std::f64::consts::PI)
-        };
         *value = (*value + (2.0 * rng.uniform() - 1.0) * bound).clamp(info.lower, info.upper);
     }
     (base, start)
+}
+
+/// The most [`perturb_robot`] moves each joint from `q` (either way, before the limits): delta
+/// over the reach of the links it moves, from the first one's origin (at least 5 cm), capped at
+/// a half turn; delta for a prismatic joint.
+pub fn joint_start_bounds(
+    body: &ArticulatedBody,
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    delta_m: f64,
+) -> Vec<f64> {
+    let poses = body.link_poses(world_from_root, q);
+    let root = world_from_root * Point3::origin();
+    (0..q.len())
+        .map(|parameter| {
+            if body.parameters()[parameter].prismatic {
+                return delta_m;
+            }
+            let moved = body.moved_by(parameter);
+            let origin = moved.first().map_or(root, |&l| poses[l] * Point3::origin());
+            (delta_m / reach_from(body, &poses, &moved, &origin).max(0.05))
+                .min(std::f64::consts::PI)
+        })
+        .collect()
 }
 
 /// Outcome of one alignment of one object (the robot or a link).
