@@ -54,7 +54,9 @@ impl FitContext<'_> {
     /// queries, about every coarse value within the coarse scores' noise of their best, the
     /// best [`FINE_CENTRES`] coarse peaks and the state. The best value,
     /// when it scores above the state by [`sweep_gain_needed`], is refined and kept when it
-    /// still scores that much more on the same keypoints. Returns the iterations spent.
+    /// still scores that much more on the same keypoints. A joint whose state leaves fewer
+    /// free points unexplained than that gain is not swept at all. Returns the iterations
+    /// spent.
     ///
     /// Coarse to fine because the whole turn in narrow steps from exact queries cost the UR10's
     /// fit at 100 mm a third to a half more time (its two wrist joints: 260 and 150 values on 460
@@ -124,9 +126,18 @@ impl FitContext<'_> {
                 graded_in(world_from_root, &trial, band, distances)
             };
             let score = |value: f64| graded_at(value, band, Distances::Exact);
+            let current = q[parameter];
+            let here = score(current);
+            // A point grades at most 1: when even every free point at its best could not
+            // gain what a swept value must, no value can, and the sweep would only cost
+            // time. A converged wrist explains nearly all its points (the UR10's two wrist
+            // joints in the bench's scene 448 of 460 and 138 of 145, against gains of 22
+            // and 12 needed).
+            if free.len() as f64 - here < sweep_gain_needed(here) {
+                continue;
+            }
             let coarse_band = COARSE_STEP_BANDS * band;
             let coarse_score = |value: f64| graded_at(value, coarse_band, Distances::Grids);
-            let current = q[parameter];
             // Steps that move the farthest point by the band, and the coarse pass's by its own.
             let step = band / window.reach_m;
             let coarse_step = COARSE_STEP_BANDS * step;
@@ -168,7 +179,6 @@ impl FitContext<'_> {
             } else {
                 values.iter().map(|&v| score(v)).collect()
             };
-            let here = score(current);
             let Some((best_index, &best_score)) =
                 scores.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))
             else {
