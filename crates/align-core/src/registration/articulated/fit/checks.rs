@@ -11,7 +11,7 @@ use super::context::FitContext;
 use super::contrast::{OwnedState, State};
 use super::placed::{Placed, coverage, reach_m};
 use super::refine::refine;
-use super::report::{FinalState, RobotTwin, final_state};
+use super::report::RobotTwin;
 use super::tree::{Window, search_order, spins_in_place};
 use crate::registration::articulated::body::JointAxis;
 
@@ -67,7 +67,6 @@ impl FitContext<'_> {
         &self,
         world_from_root: &mut Isometry3<f64>,
         q: &mut Vec<f64>,
-        state: &mut FinalState,
     ) -> usize {
         let FitContext {
             body,
@@ -133,10 +132,8 @@ impl FitContext<'_> {
                     .contrast_among((world_from_root, q), (&trial_root, &trial_q), &moved)
                     .map_or(0, |(fit, trial)| trial - fit);
                 if gain >= options.min_link_points as i64 {
-                    let trial_state = final_state(body, scan.fine, &trial_root, &trial_q, options);
                     *world_from_root = trial_root;
                     *q = trial_q;
-                    *state = trial_state;
                 }
             }
         }

@@ -18,7 +18,6 @@ use rayon::prelude::*;
 use super::context::FitContext;
 use super::placed::{Distances, Placed};
 use super::refine::refine;
-use super::report::{FinalState, final_state};
 use super::tree::{Window, search_order};
 
 /// A joint is swept when the fine keypoints near the links it moves that no other link explains
@@ -71,7 +70,6 @@ impl FitContext<'_> {
         &self,
         world_from_root: &mut Isometry3<f64>,
         q: &mut Vec<f64>,
-        state: &mut FinalState,
     ) -> usize {
         let FitContext {
             body,
@@ -204,7 +202,6 @@ impl FitContext<'_> {
             let explains_more = graded_in(&trial_root, &trial_q, band, Distances::Exact) - here
                 >= sweep_gain_needed(here);
             if explains_more {
-                *state = final_state(body, scan.fine, &trial_root, &trial_q, options);
                 *world_from_root = trial_root;
                 *q = trial_q;
             }

@@ -310,9 +310,9 @@ pub fn align_robot(
         iterations += fit.base_turn_check(&mut world_from_root, &mut q);
     }
     // Last, every keypoint against the exact surfaces, in the narrow band the refinements
-    // before ended in (the state is within it), and what the state explains.
+    // before ended in (the state is within it).
     let refine_exactly = |world_from_root: &mut Isometry3<f64>, q: &mut Vec<f64>| {
-        let spent = refine(
+        refine(
             body,
             &keypoints,
             world_from_root,
@@ -320,19 +320,14 @@ pub fn align_robot(
             options.band_min_m,
             options,
             true,
-        );
-        (
-            spent,
-            final_state(body, &keypoints, world_from_root, q, options),
         )
     };
-    let (spent, mut state) = refine_exactly(&mut world_from_root, &mut q);
-    iterations += spent;
+    iterations += refine_exactly(&mut world_from_root, &mut q);
     // From a near start the searches settle every joint in its basin (every trial measured):
     // the look would only cost time there. (A global start is never near.)
     if start_mesh.is_some() && !near_start {
         let looked_from = q.clone();
-        iterations += fit.second_look(&mut world_from_root, &mut q, &mut state);
+        iterations += fit.second_look(&mut world_from_root, &mut q);
         // A look that moved a joint may have moved a wrist to the true pose's twin (a
         // candidate of the elbow on the ABB IRB 1600 at 500 mm, trial 0), which the half turns
         // tried before the look cannot repair: they are tried again from where it ended.
@@ -342,16 +337,14 @@ pub fn align_robot(
             iterations += spent;
             others.extend(more);
             if q != flipped_from {
-                let (spent, flipped) = refine_exactly(&mut world_from_root, &mut q);
-                iterations += spent;
-                state = flipped;
+                iterations += refine_exactly(&mut world_from_root, &mut q);
             }
         }
     }
     // The small links at the end of the chain, swept densely in a narrow band: the searches and
     // refinements before leave them within their wide bands (`distal`).
     if start_mesh.is_some() && options.distal_sweep {
-        iterations += fit.distal_sweep(&mut world_from_root, &mut q, &mut state);
+        iterations += fit.distal_sweep(&mut world_from_root, &mut q);
     }
     // Last, every link in a band a few noise widths wide: the mixed pixels a scanner leaves
     // beside silhouettes lie within the last band (a centimetre), and on a wrist of 60-120
@@ -372,13 +365,13 @@ pub fn align_robot(
             &polish,
             true,
         );
-        state = final_state(body, &keypoints, &world_from_root, &q, options);
     }
+    // What the final state explains, once: the stages before only move it.
     let report::FinalState {
         matches,
         links,
         observed,
-    } = state;
+    } = final_state(body, &keypoints, &world_from_root, &q, options);
     for (parameter, seen) in observed.iter().enumerate() {
         if !seen {
             q[parameter] = q0[parameter];
