@@ -100,9 +100,13 @@ impl FitContext<'_> {
                 // the state at the search grid's resolution, and refined it returns there: most
                 // candidates are (a refinement costs about as much as the rest of the look).
                 let nearby = self
-                    .deviations_m((world_from_root, q), (&trial_root, &trial_q), &moved)
-                    .into_iter()
-                    .all(|(_, deviation_m)| deviation_m <= options.voxel_m);
+                    .links_apart(
+                        (world_from_root, q),
+                        (&trial_root, &trial_q),
+                        &moved,
+                        options.voxel_m,
+                    )
+                    .is_empty();
                 if nearby {
                     continue;
                 }
