@@ -214,23 +214,28 @@ pub fn align_robot(
     if near.is_empty() {
         return Err(RobotFitError::NothingInReach { reach_m: reach });
     }
-    // A scan too sparse for the voxel (most points isolated) is kept whole: its strays cannot
-    // be told from its surfaces that way.
-    let crowded = without_isolated(&near, options.voxel_m, options.isolated_min_neighbours);
-    let near = if 2 * crowded.len() >= near.len() {
-        crowded
-    } else {
-        near
+    let prepare_scan = || {
+        // A scan too sparse for the voxel (most points isolated) is kept whole: its strays
+        // cannot be told from its surfaces that way.
+        let crowded = without_isolated(&near, options.voxel_m, options.isolated_min_neighbours);
+        let near = if 2 * crowded.len() >= near.len() {
+            crowded
+        } else {
+            near
+        };
+        let (keypoints, coarse) = rayon::join(
+            || voxel_representatives(&near, options.voxel_m),
+            || voxel_representatives(&near, options.voxel_m * 3.0),
+        );
+        (near, keypoints, coarse)
     };
-    let (keypoints, coarse) = rayon::join(
-        || voxel_representatives(&near, options.voxel_m),
-        || voxel_representatives(&near, options.voxel_m * 3.0),
-    );
+    // The robot as one rigid mesh at the start (its tree built) does not depend on the scan:
+    // made beside the scan's filtering and binning, mostly serial work.
+    let ((near, keypoints, coarse), start_mesh) = rayon::join(prepare_scan, || body.rigid_mesh(q0));
     let scan = Keypoints {
         coarse: &coarse,
         fine: &keypoints,
     };
-    let start_mesh = body.rigid_mesh(q0);
     let global = start_mesh
         .as_ref()
         .is_some_and(|mesh| is_global(mesh, delta_m));
