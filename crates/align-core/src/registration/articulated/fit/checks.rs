@@ -200,7 +200,13 @@ impl FitContext<'_> {
         let flips = |base: &Isometry3<f64>, q: &[f64], indices: std::ops::Range<usize>| {
             let flip = |index: usize| -> Flipped {
                 let (trial_base, trial_q, spent) = self.flipped(base, q, &order, index)?;
-                Some((score(&trial_base, &trial_q), trial_base, trial_q, spent))
+                // Only a global fit ranks its runners-up by it.
+                let trial_score = if global {
+                    score(&trial_base, &trial_q)
+                } else {
+                    0
+                };
+                Some((trial_score, trial_base, trial_q, spent))
             };
             let flipped: Vec<Flipped> = if options.parallel {
                 indices.clone().into_par_iter().map(flip).collect()
