@@ -21,7 +21,7 @@ pub(super) const DISTINCT_M: f64 = 1e-3;
 
 /// Vertices of a link compared for [`DISTINCT_M`]: enough to see a surface move by a
 /// millimetre, few enough to cost nothing beside the fit.
-const SAMPLES_PER_LINK: usize = 400;
+pub(super) const SAMPLES_PER_LINK: usize = 400;
 
 /// A state of the robot: the root's pose in the world and the joint values.
 pub(super) type State<'s> = (&'s Isometry3<f64>, &'s [f64]);
@@ -38,7 +38,12 @@ pub(super) type OwnedState = (Isometry3<f64>, Vec<f64>);
 /// query. Two states a refinement apart move most links by tenths of a millimetre, and the
 /// closest-point queries of every vertex of every link were most of [`FitContext::twin`]'s
 /// time (about 4 ms of a 100 mm fit of the UR10, on one core).
-fn placed_apart(mesh: &Mesh, a: &Isometry3<f64>, b: &Isometry3<f64>, beyond_m: f64) -> bool {
+pub(super) fn placed_apart(
+    mesh: &Mesh,
+    a: &Isometry3<f64>,
+    b: &Isometry3<f64>,
+    beyond_m: f64,
+) -> bool {
     let b_from_a = b.inverse() * a;
     let a_from_b = b_from_a.inverse();
     let count = mesh.vertices().count();

@@ -6,6 +6,7 @@ use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3
 
 use super::base::{round_base_axis, turned_towards};
 use super::context::{FitContext, Keypoints};
+use super::contrast::{SAMPLES_PER_LINK, placed_apart};
 use super::distal::{fine_values, highest_peaks};
 use super::joint_search::{SweptTubes, distinct_values, spread_scores};
 use super::placed::{Distances, Placed, placed_radius};
@@ -16,8 +17,8 @@ use crate::kinematics::{PackageMap, RobotModel};
 use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
 use crate::registration::sampling::voxel_representatives;
 use crate::robots::ShippedRobot;
-use crate::trials::TrialRng;
 use crate::trials::robot_scan::{RobotScanOptions, scan_robot};
+use crate::trials::{TrialRng, random_displacement};
 
 /// A robot of primitives whose wrist turns between the two plates of its forearm's fork, a
 /// millimetre from each (as an industrial robot's wrist sits in its forearm), with a flange
@@ -635,4 +636,57 @@ fn the_sweeps_fine_pass_searches_about_the_highest_distinct_peaks_once_each() {
             .filter(|w| w[1] - w[0] < 0.5)
             .all(|w| w[1] - w[0] <= 0.05 + 1e-12)
     );
+}
+
+/// `placed_apart` answers without querying the vertices a move keeps within the bound: its
+/// answer must be the one every vertex queried gives, on a box and on a cylinder (which its
+/// own spin moves far without moving its surface), for moves from a hundredth of the bound to
+/// ten times it.
+#[test]
+fn links_placed_apart_are_those_some_sampled_vertex_deviates_beyond_the_bound() {
+    let (body, base) = forked_wrist_and_its_base();
+    let flange = (0..body.links().len())
+        .find(|&l| body.links()[l].name == "flange")
+        .unwrap();
+    let bound_m = 1e-3;
+    let mut rng = TrialRng::new(41);
+    let mut answers = [0usize; 2];
+    for link in [base, flange] {
+        let mesh = body.links()[link].surface.as_ref().unwrap();
+        let stride = mesh.vertices().count().div_ceil(SAMPLES_PER_LINK).max(1);
+        let radius_m = mesh.radius_m();
+        for trial in 0..60 {
+            let a = random_displacement(&mut rng, 0.1, 1.0);
+            let size_m = bound_m * 10f64.powf(-2.0 + 3.0 * (trial % 20) as f64 / 19.0);
+            // Every third move a spin about the flange's own axis (its x), far beyond the
+            // bound at its rim.
+            let b = if trial % 3 == 0 {
+                a * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.5 + size_m)
+            } else {
+                a * random_displacement(&mut rng, size_m, radius_m)
+            };
+            let b_from_a = b.inverse() * a;
+            let deviation_m = mesh
+                .vertices()
+                .step_by(stride)
+                .map(|v| {
+                    let there = mesh.closest_point(&(b_from_a * v)).signed_distance.abs();
+                    let back = mesh
+                        .closest_point(&(b_from_a.inverse() * v))
+                        .signed_distance
+                        .abs();
+                    there.max(back)
+                })
+                .fold(0.0, f64::max);
+            let apart = placed_apart(mesh, &a, &b, bound_m);
+            assert_eq!(
+                apart,
+                deviation_m > bound_m,
+                "link {link}, trial {trial}: deviation {deviation_m} m"
+            );
+            answers[usize::from(apart)] += 1;
+        }
+    }
+    // Both answers came up (the test can tell a wrong one either way).
+    assert!(answers.iter().all(|&n| n >= 10), "{answers:?}");
 }
