@@ -1,7 +1,7 @@
 //! Hierarchical alignment of the shipped robots in scanner-like clouds.
 
 use align_core::registration::articulated::{
-    ArticulatedBody, RobotFitOptions, align_robot, searches_globally,
+    ArticulatedBody, RobotFitOptions, align_robot, observed_joints_at, searches_globally,
 };
 use align_core::robots::ShippedRobot;
 use align_core::trials::TrialRng;
@@ -360,6 +360,20 @@ fn a_link_no_scanner_sees_is_reported_and_its_joint_kept_at_the_start() {
     let last = fit.joints.last().expect("iiwa has joints");
     assert!(!last.observed);
     assert_eq!(last.value, q0[q0.len() - 1]);
+    // Judged at the true pose as the fit judges its own state (what the trials ask before they
+    // forgive a joint reported unseen): the same joints are shown, the hidden one is not.
+    let shown = observed_joints_at(
+        &body,
+        &cloud,
+        &base,
+        0.05,
+        &truth,
+        &q_true,
+        &RobotFitOptions::default(),
+    )
+    .expect("judged");
+    let claimed: Vec<bool> = fit.joints.iter().map(|joint| joint.observed).collect();
+    assert_eq!(shown, claimed);
     // The links that are seen are still found.
     let fitted = body.link_poses(&fit.world_from_root, &fit.q);
     let true_poses = body.link_poses(&truth, &q_true);

@@ -248,8 +248,9 @@ pub struct RobotCell {
     pub delta_mm: f64,
     pub trials: usize,
     pub succeeded: usize,
-    /// Within 1 mm only through what the fit reported (a spin it said the scan does not show,
-    /// or its ambiguous twin): not in `succeeded`.
+    /// Within 1 mm only through what the fit reported (joints it said the scan does not show,
+    /// where the scan does not pin them at the true pose either, or its ambiguous twin): not
+    /// in `succeeded`.
     pub reported: usize,
     pub failed: usize,
     pub mean_error_mm: f64,

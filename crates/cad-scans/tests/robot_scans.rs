@@ -16,8 +16,8 @@ use abb::{ABB_TRIAL_HOME, abb_irb1600};
 const SEED: u64 = 20;
 const SPREAD_RAD: f64 = 0.5;
 
-/// Runs `trials` of scene `scene` at `delta_m` and asserts that no link failed (a flange's
-/// spin the fit reports unseen is counted apart, as `reported`).
+/// Runs `trials` of scene `scene` at `delta_m` and asserts that no link failed (a joint the fit
+/// reports unseen where the scan does not show it is counted apart, as `reported`).
 fn no_link_fails(
     body: &ArticulatedBody,
     home: &[f64],
@@ -25,7 +25,19 @@ fn no_link_fails(
     delta_m: f64,
     trials: &[usize],
 ) {
-    let scanned = seeded_scene(body, home, SPREAD_RAD, SEED, scene, &ScanNoise::default())
+    no_link_fails_with_seed(body, home, SEED, scene, delta_m, trials);
+}
+
+/// [`no_link_fails`] in the scenes of another seed (`robot-scans --seed`).
+fn no_link_fails_with_seed(
+    body: &ArticulatedBody,
+    home: &[f64],
+    seed: u64,
+    scene: usize,
+    delta_m: f64,
+    trials: &[usize],
+) {
+    let scanned = seeded_scene(body, home, SPREAD_RAD, seed, scene, &ScanNoise::default())
         .expect("the scene scans");
     for &trial in trials {
         let rows = scene_trials(
@@ -33,7 +45,7 @@ fn no_link_fails(
             &scanned,
             &[delta_m],
             trial..trial + 1,
-            SEED,
+            seed,
             scene,
             |_, _| {},
         );
@@ -42,7 +54,7 @@ fn no_link_fails(
             assert_eq!(
                 tally.failed,
                 0,
-                "scene {scene}, trial {trial} at {} mm, {}: {tally:?}",
+                "seed {seed}, scene {scene}, trial {trial} at {} mm, {}: {tally:?}",
                 delta_m * 1e3,
                 row.object
             );
@@ -145,4 +157,19 @@ fn the_abb_wrist_on_the_coarse_sweeps_plateau_at_1000_mm_is_found() {
         return;
     };
     no_link_fails(&body, &ABB_TRIAL_HOME, 1, 1.0, &[2]);
+}
+
+/// The refinements stopped when the step's motion over all points fell below the tolerance: a
+/// wrist's hundred points among 30 000 moved by a millimetre count a twentieth of that. In
+/// scene 4, trial 0 at 50 mm ended with joint 5 0.015 rad short (link_6 1.01 mm off), and in the
+/// scenes of seed 77 the same scene's joints failed link_5 in trials 2, 4, 7 and 8 at 50 mm
+/// (0.25 mm mean error on link_5 over the ten, 0.04 mm and 0.22 mm now). The exact refinements
+/// now stop on the motion of the link they move most.
+#[test]
+fn the_abb_wrist_the_refinement_stopped_short_of_in_ray_cast_scans_is_fitted() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails(&body, &ABB_TRIAL_HOME, 4, 0.05, &[0]);
+    no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 77, 4, 0.05, &[2, 4]);
 }

@@ -9,12 +9,14 @@
 use std::ops::Range;
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
 
 use super::robot_scan::{RobotScanOptions, scan_robot};
 use super::{SUCCESS_THRESHOLD_M, TrialRng, random_displacement};
 use crate::geometry::Mesh;
-use crate::registration::articulated::{ArticulatedBody, RobotFit, RobotFitOptions, align_robot};
+use crate::registration::articulated::{
+    ArticulatedBody, RobotFit, RobotFitOptions, align_robot, observed_joints_at,
+};
 use crate::registration::pca::{PcaOptions, align_cloud};
 
 /// Largest distance between the surface at `estimated` and at `truth` (both world_from_mesh):
@@ -102,8 +104,8 @@ pub struct Outcome {
     pub error_m: f64,
     pub time_s: f64,
     /// The fit reported what the scan could not tell, and `error_m` is the error of what it did
-    /// claim: the spin of the link's own joint reported as unseen (`observed: false`) set to
-    /// the truth's, or the fit's twin (reported `ambiguous`) where the twin is the true pose. A
+    /// claim: the joints moving the link that it reported as unseen (`observed: false`) set to
+    /// the truth's values, or the fit's twin (reported `ambiguous`) where the twin is the true pose. A
     /// fit that reports what it cannot tell has not guessed; one that picks wrong unreported has.
     pub reported: bool,
 }
@@ -216,7 +218,24 @@ fn hierarchical_trial(
             links.len() + 1
         ];
     };
-    let fit_errors = link_errors(body, fit, poses, links);
+    // Which joints the scan pins at the true pose, judged as the fit judges its own state: a
+    // joint the fit reports unseen is forgiven only where the scan does not show it.
+    let shown = observed_joints_at(
+        body,
+        scanned.cloud,
+        &base,
+        delta_m,
+        &scanned.world_from_root,
+        scanned.q,
+        &RobotFitOptions::default(),
+    )
+    .unwrap_or_else(|_| vec![true; scanned.q.len()]);
+    let truth = Truth {
+        poses,
+        q: scanned.q,
+        shown: &shown,
+    };
+    let fit_errors = link_errors(body, fit, &truth, links);
     // The other pose the fit reported as equally good, when it did.
     let twin_errors = fit.twin.as_ref().filter(|t| t.ambiguous).map(|twin| {
         let as_fit = RobotFit {
@@ -224,7 +243,7 @@ fn hierarchical_trial(
             q: twin.q.clone(),
             ..fit.clone()
         };
-        link_errors(body, &as_fit, poses, links)
+        link_errors(body, &as_fit, &truth, links)
     });
     let worst = |errors: &[(f64, bool)]| {
         let error_m = errors.iter().map(|(e, _)| *e).fold(0.0, f64::max);
@@ -249,12 +268,21 @@ fn hierarchical_trial(
         .collect()
 }
 
-/// Each link's error in `fit`, and whether it counts only because the fit reported the
-/// link's spin as unseen ([`unseen_spin_forgiven_m`]).
+/// What a trial knows that no fit does: every link's true pose, the true joint values, and
+/// which joints the scan pins at the true pose ([`observed_joints_at`]).
+struct Truth<'a> {
+    poses: &'a [Isometry3<f64>],
+    q: &'a [f64],
+    shown: &'a [bool],
+}
+
+/// Each link's error in `fit`, and whether it counts only because the fit reported joints
+/// that move the link as unseen where the scan does not show them
+/// ([`unseen_joints_forgiven_m`]).
 fn link_errors(
     body: &ArticulatedBody,
     fit: &RobotFit,
-    poses: &[Isometry3<f64>],
+    truth: &Truth,
     links: &[usize],
 ) -> Vec<(f64, bool)> {
     let fitted = body.link_poses(&fit.world_from_root, &fit.q);
@@ -262,11 +290,11 @@ fn link_errors(
         .iter()
         .map(|&link| {
             let mesh = body.links()[link].surface.as_ref().expect("has surface");
-            let error_m = surface_deviation_m(mesh, &fitted[link], &poses[link]);
+            let error_m = surface_deviation_m(mesh, &fitted[link], &truth.poses[link]);
             if error_m < SUCCESS_THRESHOLD_M {
                 return (error_m, false);
             }
-            match unseen_spin_forgiven_m(body, fit, link, &poses[link]) {
+            match unseen_joints_forgiven_m(body, fit, link, truth) {
                 Some(forgiven_m) if forgiven_m < error_m => (forgiven_m, true),
                 _ => (error_m, false),
             }
@@ -274,50 +302,45 @@ fn link_errors(
         .collect()
 }
 
-/// The error of `link` in `fit` with the spin of its own joint set to the truth's, when the fit
-/// reported that joint as not seen in the scan and the joint turns no other link with a
-/// surface (a flange whose spin the scan cannot show: the ABB IRB 1600's link_6); `None`
-/// otherwise. The spin is the twist about the joint's axis (as fitted) of the rotation from
-/// the fitted link to the true one.
-fn unseen_spin_forgiven_m(
+/// The error of `link` in `fit` with every joint that moves it and that the fit reported as
+/// not seen in the scan (`observed: false`, kept at its start value) set to the truth's value,
+/// the base and the joints it claimed as fitted. `None` when the fit claimed every joint that
+/// moves the link, or when it reported unseen a joint the scan pins at the true pose
+/// (`truth.shown`): that joint the fit lost, it did not fail to see it. Forgiven: a flange whose
+/// spin the scan cannot show (the ABB IRB 1600's link_6), a wrist the scan shows on a few
+/// points that do not pin its joint. A joint claimed and wrong stays the link's error.
+fn unseen_joints_forgiven_m(
     body: &ArticulatedBody,
     fit: &RobotFit,
     link: usize,
-    truth: &Isometry3<f64>,
+    truth: &Truth,
 ) -> Option<f64> {
-    let parameter = *body.movers(link).last()?;
-    let unseen = fit
-        .joints
-        .get(parameter)
-        .is_some_and(|joint| !joint.observed);
-    let only_this_link = body
-        .moved_by(parameter)
-        .into_iter()
-        .filter(|&l| body.links()[l].surface.is_some())
-        .eq([link]);
-    if !unseen || !only_this_link || body.parameters()[parameter].prismatic {
+    let unseen: Vec<usize> = body
+        .movers(link)
+        .iter()
+        .copied()
+        .filter(|&parameter| {
+            fit.joints
+                .get(parameter)
+                .is_some_and(|joint| !joint.observed)
+        })
+        .collect();
+    if unseen.is_empty()
+        || unseen
+            .iter()
+            .any(|&parameter| truth.shown.get(parameter).is_none_or(|&shown| shown))
+    {
         return None;
     }
-    let fitted = body.link_poses(&fit.world_from_root, &fit.q);
-    let drives: Vec<(Vector3<f64>, f64)> = body
-        .axes(&fitted)
-        .into_iter()
-        .flatten()
-        .filter(|(_, driven, _)| *driven == parameter)
-        .map(|(axis, _, multiplier)| (axis.axis, multiplier))
-        .collect();
-    let [(axis, multiplier)] = drives.as_slice() else {
-        return None;
-    };
-    let relative = truth.rotation * fitted[link].rotation.inverse();
-    let twist_rad = 2.0 * relative.imag().dot(axis).atan2(relative.w);
     let mut q = fit.q.clone();
-    q[parameter] += twist_rad / multiplier;
+    for parameter in unseen {
+        q[parameter] = *truth.q.get(parameter)?;
+    }
     let mesh = body.links()[link].surface.as_ref()?;
     Some(surface_deviation_m(
         mesh,
         &body.link_poses(&fit.world_from_root, &q)[link],
-        truth,
+        &truth.poses[link],
     ))
 }
 
@@ -460,17 +483,33 @@ mod tests {
     <origin xyz="0.1 0 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
 </robot>"#;
 
-    fn fit(world_from_root: Isometry3<f64>, q: f64, observed: bool) -> RobotFit {
+    /// A base, a wrist on a joint about y and a plate flange on a joint about x beyond it: the
+    /// wrist's joint moves both links.
+    const WRIST_URDF: &str = r#"<robot name="wrist">
+  <link name="base"><visual><geometry><box size="0.2 0.2 0.2"/></geometry></visual></link>
+  <link name="wrist"><visual><origin xyz="0.05 0 0"/><geometry><box size="0.1 0.04 0.04"/></geometry></visual></link>
+  <link name="flange"><visual><origin xyz="0.005 0 0.02"/><geometry><box size="0.01 0.06 0.04"/></geometry></visual></link>
+  <joint name="bend" type="revolute"><parent link="base"/><child link="wrist"/>
+    <origin xyz="0.1 0 0"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="spin" type="revolute"><parent link="wrist"/><child link="flange"/>
+    <origin xyz="0.1 0 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>"#;
+
+    fn fit_of(world_from_root: Isometry3<f64>, joints: &[(f64, bool)]) -> RobotFit {
         RobotFit {
             world_from_root,
-            q: vec![q],
+            q: joints.iter().map(|(q, _)| *q).collect(),
             links: Vec::new(),
-            joints: vec![JointFit {
-                name: "spin".to_owned(),
-                value: q,
-                observed,
-                turns_with_base: false,
-            }],
+            joints: joints
+                .iter()
+                .enumerate()
+                .map(|(index, &(value, observed))| JointFit {
+                    name: format!("joint {index}"),
+                    value,
+                    observed,
+                    turns_with_base: false,
+                })
+                .collect(),
             iterations: 0,
             rms_m: 0.0,
             time_s: 0.0,
@@ -478,30 +517,114 @@ mod tests {
         }
     }
 
+    fn fit(world_from_root: Isometry3<f64>, q: f64, observed: bool) -> RobotFit {
+        fit_of(world_from_root, &[(q, observed)])
+    }
+
+    fn body_of(urdf: &str) -> ArticulatedBody {
+        let model = RobotModel::from_urdf_str(urdf, &PackageMap::new()).unwrap();
+        ArticulatedBody::from_model(&model).unwrap()
+    }
+
+    fn link_named(body: &ArticulatedBody, name: &str) -> usize {
+        (0..body.links().len())
+            .find(|&l| body.links()[l].name == name)
+            .unwrap()
+    }
+
     #[test]
     fn only_a_spin_the_fit_reported_as_unseen_is_forgiven_and_nothing_else() {
-        let model = RobotModel::from_urdf_str(PLATE_FLANGE_URDF, &PackageMap::new()).unwrap();
-        let body = ArticulatedBody::from_model(&model).unwrap();
-        let flange = (0..body.links().len())
-            .find(|&l| body.links()[l].name == "flange")
-            .unwrap();
-        let truth = body.link_poses(&Isometry3::identity(), &[0.3])[flange];
+        let body = body_of(PLATE_FLANGE_URDF);
+        let flange = link_named(&body, "flange");
+        let true_q = [0.3];
+        let poses = body.link_poses(&Isometry3::identity(), &true_q);
+        let truth = Truth {
+            poses: &poses,
+            q: &true_q,
+            shown: &[false],
+        };
         let mesh = body.links()[flange].surface.as_ref().unwrap();
         // Turned 0.8 rad from the truth: the plate's corners are some 20 mm off.
         let turned = fit(Isometry3::identity(), 1.1, false);
         let fitted = body.link_poses(&turned.world_from_root, &turned.q)[flange];
-        assert!(surface_deviation_m(mesh, &fitted, &truth) > 0.01);
-        let forgiven = unseen_spin_forgiven_m(&body, &turned, flange, &truth).unwrap();
+        assert!(surface_deviation_m(mesh, &fitted, &poses[flange]) > 0.01);
+        let forgiven = unseen_joints_forgiven_m(&body, &turned, flange, &truth).unwrap();
         assert!(forgiven < 1e-9, "{forgiven}");
         // A spin the fit claims to have seen is its error.
         let claimed = fit(Isometry3::identity(), 1.1, true);
         assert_eq!(
-            unseen_spin_forgiven_m(&body, &claimed, flange, &truth),
+            unseen_joints_forgiven_m(&body, &claimed, flange, &truth),
+            None
+        );
+        // A spin reported unseen that the scan shows at the true pose is one the fit lost.
+        let shown = Truth {
+            shown: &[true],
+            ..truth
+        };
+        assert_eq!(
+            unseen_joints_forgiven_m(&body, &turned, flange, &shown),
             None
         );
         // Forgiving the spin does not hide a base 2 mm off.
         let shifted = fit(Translation3::new(0.0, 0.002, 0.0).into(), 1.1, false);
-        let forgiven = unseen_spin_forgiven_m(&body, &shifted, flange, &truth).unwrap();
+        let forgiven = unseen_joints_forgiven_m(&body, &shifted, flange, &truth).unwrap();
         assert!((forgiven - 0.002).abs() < 2e-4, "{forgiven}");
+    }
+
+    #[test]
+    fn a_wrist_joint_reported_unseen_is_forgiven_on_every_link_it_moves_and_a_claimed_one_is_not() {
+        let body = body_of(WRIST_URDF);
+        let (wrist, flange) = (link_named(&body, "wrist"), link_named(&body, "flange"));
+        let names: Vec<&str> = body.parameters().iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, ["bend", "spin"]);
+        let true_q = [0.4, 0.2];
+        let poses = body.link_poses(&Isometry3::identity(), &true_q);
+        let truth = Truth {
+            poses: &poses,
+            q: &true_q,
+            shown: &[false, false],
+        };
+        let error_of = |fit: &RobotFit, link: usize| {
+            let fitted = body.link_poses(&fit.world_from_root, &fit.q)[link];
+            surface_deviation_m(
+                body.links()[link].surface.as_ref().unwrap(),
+                &fitted,
+                &poses[link],
+            )
+        };
+        // The wrist bent 0.3 rad the wrong way and reported unseen, the flange's spin seen and
+        // right: both links are forgiven to the truth.
+        let unseen_bend = fit_of(Isometry3::identity(), &[(0.1, false), (0.2, true)]);
+        for link in [wrist, flange] {
+            assert!(error_of(&unseen_bend, link) > 0.01);
+            let forgiven = unseen_joints_forgiven_m(&body, &unseen_bend, link, &truth).unwrap();
+            assert!(forgiven < 1e-9, "{forgiven}");
+        }
+        // Not where the scan shows the bend at the true pose: the fit lost it.
+        let bend_shown = Truth {
+            shown: &[true, false],
+            ..truth
+        };
+        for link in [wrist, flange] {
+            assert_eq!(
+                unseen_joints_forgiven_m(&body, &unseen_bend, link, &bend_shown),
+                None
+            );
+        }
+        // The bend claimed as seen and wrong, the spin reported unseen: the wrist is not
+        // forgiven at all, the flange only its spin, which leaves the bend's error.
+        let claimed_bend = fit_of(Isometry3::identity(), &[(0.1, true), (1.0, false)]);
+        assert_eq!(
+            unseen_joints_forgiven_m(&body, &claimed_bend, wrist, &truth),
+            None
+        );
+        let flange_forgiven =
+            unseen_joints_forgiven_m(&body, &claimed_bend, flange, &truth).unwrap();
+        let bend_only = fit_of(Isometry3::identity(), &[(0.1, true), (0.2, true)]);
+        assert!(flange_forgiven > 0.01, "{flange_forgiven}");
+        assert!(
+            (flange_forgiven - error_of(&bend_only, flange)).abs() < 1e-12,
+            "{flange_forgiven}"
+        );
     }
 }

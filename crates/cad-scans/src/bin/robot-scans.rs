@@ -24,9 +24,10 @@ const ABB_HOME: [f64; 6] = [0.0, 0.3, -0.2, 0.0, 0.6, 0.0];
 /// several seeded scenes (the robot turned and its joints moved from home), and fits it with
 /// ips's hierarchical alignment (base pose and every joint) from starts displaced by the
 /// thesis's scheme, every joint moved too. Success per link: surface deviation under 1 mm.
-/// "Reported": within 1 mm only through what the fit said it could not tell (a flange's spin
-/// it reported unseen, an ambiguous twin). Progress goes to stderr, the table (or --json) to
-/// stdout.
+/// "Reported": within 1 mm only through what the fit said it could not tell (joints it
+/// reported unseen, set to the truth's values, where the scan does not pin them at the true
+/// pose either: a flange's spin, a wrist shown on a few points; or an ambiguous twin). Progress
+/// goes to stderr, the table (or --json) to stdout.
 ///
 /// Default robot: the ABB IRB 1600 from ../shared/data ($CAD_SCANS_ABB_URDF), never in the
 /// repository. Example: `robot-scans --deltas-mm 50,200 --scenes 5 --trials 10`.

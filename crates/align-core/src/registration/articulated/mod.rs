@@ -7,5 +7,5 @@ pub mod fit;
 pub use body::{ArticulatedBody, BodyError, BodyLink, BodyParameter};
 pub use fit::{
     JointFit, LinkFit, RobotFit, RobotFitError, RobotFitOptions, RobotTwin, align_robot,
-    searches_globally,
+    observed_joints_at, searches_globally,
 };

@@ -17,8 +17,9 @@ use crate::BadInput;
 #[derive(Debug, Serialize)]
 pub struct TallyJson {
     pub succeeded: usize,
-    /// Within 1 mm only through what the fit reported: a spin it said the scan does not show
-    /// (set to the truth's), or its ambiguous twin being the true pose. Not in `succeeded`.
+    /// Within 1 mm only through what the fit reported: joints it said the scan does not show
+    /// (set to the truth's values), where the scan does not pin them at the true pose either,
+    /// or its ambiguous twin being the true pose. Not in `succeeded`.
     #[serde(skip_serializing_if = "is_zero")]
     pub reported: usize,
     pub failed: usize,

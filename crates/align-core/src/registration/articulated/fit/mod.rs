@@ -203,35 +203,17 @@ pub fn align_robot(
 ) -> Result<RobotFit, RobotFitError> {
     let started = Instant::now();
     check_inputs(body, cloud, world_from_root_start, q0, delta_m)?;
-    // Only points the robot can reach from where the start puts it take part.
-    let root = world_from_root_start * Point3::origin();
-    let reach = body.max_reach_m() + 2.0 * delta_m + options.band_min_m;
-    let near: Vec<Point3<f64>> = cloud
-        .iter()
-        .filter(|p| (*p - root).norm() <= reach)
-        .copied()
-        .collect();
-    if near.is_empty() {
-        return Err(RobotFitError::NothingInReach { reach_m: reach });
-    }
-    let prepare_scan = || {
-        // A scan too sparse for the voxel (most points isolated) is kept whole: its strays
-        // cannot be told from its surfaces that way.
-        let crowded = without_isolated(&near, options.voxel_m, options.isolated_min_neighbours);
-        let near = if 2 * crowded.len() >= near.len() {
-            crowded
-        } else {
-            near
-        };
-        let (keypoints, coarse) = rayon::join(
-            || voxel_representatives(&near, options.voxel_m),
-            || voxel_representatives(&near, options.voxel_m * 3.0),
-        );
-        (near, keypoints, coarse)
-    };
+    let near = within_reach(body, cloud, world_from_root_start, delta_m, options)?;
     // The robot as one rigid mesh at the start (its tree built) does not depend on the scan:
     // made beside the scan's filtering and binning, mostly serial work.
-    let ((near, keypoints, coarse), start_mesh) = rayon::join(prepare_scan, || body.rigid_mesh(q0));
+    let (
+        PreparedScan {
+            near,
+            keypoints,
+            coarse,
+        },
+        start_mesh,
+    ) = rayon::join(|| prepare_scan(near, options), || body.rigid_mesh(q0));
     let scan = Keypoints {
         coarse: &coarse,
         fine: &keypoints,
@@ -418,6 +400,78 @@ pub fn align_robot(
         time_s: started.elapsed().as_secs_f64(),
         twin,
     })
+}
+
+/// The cloud's points that the robot can reach from where the start puts it: within its reach
+/// of the root grown by twice delta and the narrow band.
+fn within_reach(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root_start: &Isometry3<f64>,
+    delta_m: f64,
+    options: &RobotFitOptions,
+) -> Result<Vec<Point3<f64>>, RobotFitError> {
+    let root = world_from_root_start * Point3::origin();
+    let reach = body.max_reach_m() + 2.0 * delta_m + options.band_min_m;
+    let near: Vec<Point3<f64>> = cloud
+        .iter()
+        .filter(|p| (*p - root).norm() <= reach)
+        .copied()
+        .collect();
+    if near.is_empty() {
+        return Err(RobotFitError::NothingInReach { reach_m: reach });
+    }
+    Ok(near)
+}
+
+/// The points in reach without the isolated returns, and their keypoints.
+struct PreparedScan {
+    near: Vec<Point3<f64>>,
+    /// One per voxel of `voxel_m`.
+    keypoints: Vec<Point3<f64>>,
+    /// One per voxel of three times `voxel_m`.
+    coarse: Vec<Point3<f64>>,
+}
+
+/// The points in reach without the isolated returns, and their fine and coarse keypoints.
+fn prepare_scan(near: Vec<Point3<f64>>, options: &RobotFitOptions) -> PreparedScan {
+    // A scan too sparse for the voxel (most points isolated) is kept whole: its strays
+    // cannot be told from its surfaces that way.
+    let crowded = without_isolated(&near, options.voxel_m, options.isolated_min_neighbours);
+    let near = if 2 * crowded.len() >= near.len() {
+        crowded
+    } else {
+        near
+    };
+    let (keypoints, coarse) = rayon::join(
+        || voxel_representatives(&near, options.voxel_m),
+        || voxel_representatives(&near, options.voxel_m * 3.0),
+    );
+    PreparedScan {
+        near,
+        keypoints,
+        coarse,
+    }
+}
+
+/// Which joints the scan pins with the robot at `world_from_root` and `q`, judged as
+/// [`align_robot`] judges the state it ends in (the same keypoints from the same start and
+/// delta, the same test; see [`JointFit::observed`]). For trials that know the truth: a joint
+/// the fit reports unseen that the scan does not pin at the true pose either is one the scan
+/// does not show; one it pins there is one the fit lost.
+pub fn observed_joints_at(
+    body: &ArticulatedBody,
+    cloud: &[Point3<f64>],
+    world_from_root_start: &Isometry3<f64>,
+    delta_m: f64,
+    world_from_root: &Isometry3<f64>,
+    q: &[f64],
+    options: &RobotFitOptions,
+) -> Result<Vec<bool>, RobotFitError> {
+    check_inputs(body, cloud, world_from_root_start, q, delta_m)?;
+    let near = within_reach(body, cloud, world_from_root_start, delta_m, options)?;
+    let keypoints = prepare_scan(near, options).keypoints;
+    Ok(final_state(body, &keypoints, world_from_root, q, options).observed)
 }
 
 /// True when [`align_robot`] treats a start as not local and searches globally (detects the

@@ -199,7 +199,10 @@ fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
         matches.extend(placed.nearest(&point, 0.01, &all));
     }
     let scale = placed_radius(&placed);
-    let (normal, _) = normal_equations(&body, &placed, &matches, scale);
+    let normal = normal_equations(&body, &placed, &matches, scale, false).normal;
+    // Summed over the links' own matrices (the exact refinements' way) it is the same.
+    let summed = normal_equations(&body, &placed, &matches, scale, true).normal;
+    assert!((&summed - &normal).amax() <= 1e-12 * normal.amax());
     let n = normal.nrows();
     let step = DVector::from_fn(n, |i, _| ((i * 7 + 3) % 5) as f64 - 2.0);
     // The step taken a millionth of the way, as the refinement applies it, and each
@@ -230,6 +233,82 @@ fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
         (measured - direct).abs() <= 1e-4 * direct,
         "{measured} vs {direct}"
     );
+}
+
+#[test]
+fn the_refinements_stop_measures_a_step_on_the_link_it_moves_most() {
+    // A step that turns only the last wrist joint moves a few hundredths of the points: over
+    // all of them its motion is diluted below the tolerance, and the refinement stopped with
+    // a wrist still moving. The measure is each link's own RMS motion along the normals.
+    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+    let base = Isometry3::translation(0.2, -0.1, 0.0);
+    let q = ShippedRobot::Ur10.home();
+    let placed = Placed::new(&body, &base, &q);
+    let all: Vec<usize> = (0..body.links().len()).collect();
+    let mut rng = TrialRng::new(12);
+    let mut matches = Vec::new();
+    while matches.len() < 2000 {
+        let link = (rng.uniform() * body.links().len() as f64) as usize;
+        let Some(surface) = &body.links()[link].surface else {
+            continue;
+        };
+        let around = surface.centroid().coords
+            + Vector3::new(
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+            ) * surface.radius_m()
+                * 2.0;
+        let on = surface.closest_point(&Point3::from(around));
+        let point = placed.poses[link] * (on.point + on.normal * 0.002);
+        matches.extend(placed.nearest(&point, 0.01, &all));
+    }
+    // Most points on the base and the arm, a few on the wrist joint's links, as in a scan.
+    let wrist_parameter = body.parameters().len() - 2;
+    let wrist_links = body.moved_by(wrist_parameter);
+    let mut kept = 0;
+    matches.retain(|m| {
+        let on_wrist = wrist_links.contains(&m.link);
+        kept += usize::from(on_wrist);
+        !on_wrist || kept <= 40
+    });
+    let scale = placed_radius(&placed);
+    let equations = normal_equations(&body, &placed, &matches, scale, true);
+    let n = equations.normal.nrows();
+    let mut step = DVector::zeros(n);
+    step[6 + wrist_parameter] = 0.001;
+    // Each link's RMS motion along the normals, from the points carried by the step.
+    let epsilon = 1e-6;
+    let moved_q: Vec<f64> = q
+        .iter()
+        .enumerate()
+        .map(|(parameter, value)| value + epsilon * step[6 + parameter] / scale)
+        .collect();
+    let moved = body.link_poses(&base, &moved_q);
+    let links = body.links().len();
+    let (mut motion, mut weight) = (vec![0.0; links], vec![0.0; links]);
+    for m in &matches {
+        let carried = moved[m.link] * (placed.inverse[m.link] * m.surface);
+        let along_normal = m.normal.dot(&(carried - m.surface)) / epsilon;
+        motion[m.link] += m.weight * along_normal * along_normal;
+        weight[m.link] += m.weight;
+    }
+    let min_weight = 5.0;
+    let direct = (0..links)
+        .filter(|&l| weight[l] >= min_weight)
+        .map(|l| (motion[l] / weight[l]).sqrt())
+        .fold(0.0, f64::max);
+    let measured = equations.largest_link_motion_m(&step, min_weight);
+    assert!(
+        direct > 0.0 && (measured - direct).abs() <= 1e-4 * direct,
+        "{measured} vs {direct}"
+    );
+    let all_points = (step.dot(&(&equations.normal * &step))
+        / matches.iter().map(|m| m.weight).sum::<f64>())
+    .sqrt();
+    assert!(measured > 5.0 * all_points, "{measured} vs {all_points}");
+    // A link with fewer matches than asked does not count.
+    assert_eq!(equations.largest_link_motion_m(&step, 1e9), 0.0);
 }
 
 #[test]
