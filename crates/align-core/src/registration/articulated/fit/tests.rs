@@ -9,7 +9,7 @@ use super::context::{FitContext, Keypoints};
 use super::contrast::{SAMPLES_PER_LINK, placed_apart};
 use super::distal::{fine_values, highest_peaks};
 use super::joint_search::{SweptTubes, distinct_values, spread_scores};
-use super::placed::{Distances, Placed, placed_radius};
+use super::placed::{Distances, Match, Placed, placed_radius};
 use super::refine::normal_equations;
 use super::tree::Window;
 use super::{RobotFitOptions, align_robot};
@@ -169,20 +169,17 @@ fn a_grid_clamped_at_a_limit_is_scored_once_per_value_and_spread_back() {
     );
 }
 
-#[test]
-fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
-    // step . (J^T W J) step is the weighted sum of (J step)^2 over the points: what the
-    // refinement compares with its tolerance. The rank-one updates fill one triangle; a
-    // product with that triangle alone miscounts every coupling (the base's yaw against
-    // the first joint's), and the refinement then ran to its limit on most starts.
-    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
-    let base = Isometry3::translation(0.2, -0.1, 0.0);
-    let q = ShippedRobot::Ur10.home();
-    let placed = Placed::new(&body, &base, &q);
+/// At least `count` matches of points 2 mm off random surface points of random links, placed.
+fn matches_near_surfaces(
+    body: &ArticulatedBody,
+    placed: &Placed,
+    seed: u64,
+    count: usize,
+) -> Vec<Match> {
     let all: Vec<usize> = (0..body.links().len()).collect();
-    let mut rng = TrialRng::new(11);
+    let mut rng = TrialRng::new(seed);
     let mut matches = Vec::new();
-    while matches.len() < 400 {
+    while matches.len() < count {
         let link = (rng.uniform() * body.links().len() as f64) as usize;
         let Some(surface) = &body.links()[link].surface else {
             continue;
@@ -198,6 +195,20 @@ fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
         let point = placed.poses[link] * (on.point + on.normal * 0.002);
         matches.extend(placed.nearest(&point, 0.01, &all));
     }
+    matches
+}
+
+#[test]
+fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
+    // step . (J^T W J) step is the weighted sum of (J step)^2 over the points: what the
+    // refinement compares with its tolerance. The rank-one updates fill one triangle; a
+    // product with that triangle alone miscounts every coupling (the base's yaw against
+    // the first joint's), and the refinement then ran to its limit on most starts.
+    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+    let base = Isometry3::translation(0.2, -0.1, 0.0);
+    let q = ShippedRobot::Ur10.home();
+    let placed = Placed::new(&body, &base, &q);
+    let matches = matches_near_surfaces(&body, &placed, 11, 400);
     let scale = placed_radius(&placed);
     let normal = normal_equations(&body, &placed, &matches, scale, false).normal;
     // Summed over the links' own matrices (the exact refinements' way) it is the same.
@@ -244,25 +255,7 @@ fn the_refinements_stop_measures_a_step_on_the_link_it_moves_most() {
     let base = Isometry3::translation(0.2, -0.1, 0.0);
     let q = ShippedRobot::Ur10.home();
     let placed = Placed::new(&body, &base, &q);
-    let all: Vec<usize> = (0..body.links().len()).collect();
-    let mut rng = TrialRng::new(12);
-    let mut matches = Vec::new();
-    while matches.len() < 2000 {
-        let link = (rng.uniform() * body.links().len() as f64) as usize;
-        let Some(surface) = &body.links()[link].surface else {
-            continue;
-        };
-        let around = surface.centroid().coords
-            + Vector3::new(
-                rng.uniform() - 0.5,
-                rng.uniform() - 0.5,
-                rng.uniform() - 0.5,
-            ) * surface.radius_m()
-                * 2.0;
-        let on = surface.closest_point(&Point3::from(around));
-        let point = placed.poses[link] * (on.point + on.normal * 0.002);
-        matches.extend(placed.nearest(&point, 0.01, &all));
-    }
+    let mut matches = matches_near_surfaces(&body, &placed, 12, 2000);
     // Most points on the base and the arm, a few on the wrist joint's links, as in a scan.
     let wrist_parameter = body.parameters().len() - 2;
     let wrist_links = body.moved_by(wrist_parameter);
