@@ -29,6 +29,7 @@ impl FitContext<'_> {
             body,
             delta_m,
             global,
+            near,
             options,
             ..
         } = *self;
@@ -43,11 +44,15 @@ impl FitContext<'_> {
             return Vec::new();
         };
         // For small deltas the whole robot's rigid alignment finds the proximal links' place; for
-        // larger ones the other links, still at the wrong joint values, may pull it away. The line
-        // was set from exploratory runs without these candidates (not kept in the repo), where
-        // failures began near delta = radius; the trial table (docs/articulated-trials.md, 50
-        // trials per delta on both robots) is the check.
-        if delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
+        // larger ones the other links, still at the wrong joint values, may pull it away. The
+        // line was first set at three quarters of the proximal links' radius, from exploratory
+        // runs where failures began near delta = radius. The ABB IRB 1600's base and first link
+        // are 0.56 m in radius: at 200 mm the whole robot's alignment left its base 88-95 mm
+        // above the floor in 2 of 150 ray-cast fits (`robot-scans` seeds 77 and 91), out of
+        // reach of every stage after it. Now the line is a third of the radius, and a near
+        // start (see `NEAR_DELTA_PER_RADIUS`) never pays for the candidates: the UR10 and the
+        // iiwa14 are near at 100 mm, as the ABB is.
+        if near || delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
             return Vec::new();
         }
         // The root moves by up to about twice delta (the robot turns about its centroid).
@@ -143,8 +148,8 @@ pub(super) fn round_base_axis(
 }
 
 /// Proximal candidates are searched when delta exceeds this fraction of the proximal links'
-/// radius (see [`FitContext::proximal_candidates`]).
-const PROXIMAL_DELTA_PER_RADIUS: f64 = 0.75;
+/// radius and the start is not near (see [`FitContext::proximal_candidates`]).
+const PROXIMAL_DELTA_PER_RADIUS: f64 = 1.0 / 3.0;
 
 /// Base candidates closer than this (thesis pose distance) are one.
 const DISTINCT_BASE_M: f64 = 0.05;
