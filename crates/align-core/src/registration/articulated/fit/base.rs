@@ -47,11 +47,10 @@ impl FitContext<'_> {
         // larger ones the other links, still at the wrong joint values, may pull it away. The
         // line was first set at three quarters of the proximal links' radius, from exploratory
         // runs where failures began near delta = radius. The ABB IRB 1600's base and first link
-        // are 0.56 m in radius: at 200 mm the whole robot's alignment left its base 88-95 mm
-        // above the floor in 2 of 150 ray-cast fits (`robot-scans` seeds 77 and 91), out of
-        // reach of every stage after it. Now the line is a third of the radius, and a near
-        // start (see `NEAR_DELTA_PER_RADIUS`) never pays for the candidates: the UR10 and the
-        // iiwa14 are near at 100 mm, as the ABB is.
+        // are 0.56 m in radius: at 200 mm the whole robot's alignment left its base 88 mm above
+        // the floor in a ray-cast scan (`robot-scans --seed 77`, scene 2 trial 5), the only
+        // hypothesis, out of reach of every stage after it. Now the line is a third of the
+        // radius, and a near start (see `NEAR_DELTA_PER_RADIUS`) never pays for the candidates.
         if near || delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
             return Vec::new();
         }

@@ -97,7 +97,7 @@ use nalgebra::{Isometry3, Point3};
 
 use super::body::ArticulatedBody;
 use crate::geometry::Mesh;
-use crate::registration::pca::{PcaError, PcaOptions, align_cloud_pose, floor_plane};
+use crate::registration::pca::{PcaError, PcaOptions, align_cloud_pose};
 use crate::registration::sampling::{voxel_representatives, without_isolated};
 use base::round_base_axis;
 use context::{FitContext, Keypoints};
@@ -237,21 +237,12 @@ pub fn align_robot(
             .map_err(RobotFitError::Base)?,
         None => *world_from_root_start,
     };
-    // The floor's points, which a link's underside set down on the floor explains as well as
-    // its own, never count for a state in the beam's scores. A near start has one base
-    // hypothesis, the whole robot's alignment, and no other place of the base to weigh
-    // against it: its fit does without the plane search.
-    let floor = start_mesh
-        .as_ref()
-        .filter(|_| !near_start)
-        .and_then(|mesh| floor_plane(&coarse, mesh, 3.0 * options.voxel_m));
     let fit = FitContext {
         body,
         scan,
         delta_m,
         global,
         near: near_start,
-        floor,
         options,
     };
     let round_base = round_base_axis(body, q0, options);

@@ -388,36 +388,16 @@ pub(super) fn coverage(
     parallel: bool,
 ) -> i64 {
     let placed = Placed::new(body, world_from_root, q);
-    coverage_beside_floor(&placed, sample, &[], links, band, parallel)
-}
-
-/// [`coverage`] of the robot as `placed`, where the points `on_floor` marks (by index into
-/// `sample`; unmarked beyond its length) never count for the links, only against them. A
-/// link's underside set down on the floor explains the floor's points as well as the link
-/// explains its own: the ABB IRB 1600's base set down 0.33 m from its place, turned, covered 87
-/// floor keypoints of a beam's 3000 and 27 others, against 97 others (and 9 of the floor) where
-/// it stands, and the beam kept the wrong place (`robot-scans` seed 91 scene 0 at 500 mm,
-/// docs/articulated-trials.md). A link buried in the floor is still wrong there.
-pub(super) fn coverage_beside_floor(
-    placed: &Placed,
-    sample: &[Point3<f64>],
-    on_floor: &[bool],
-    links: &[usize],
-    band: f64,
-    parallel: bool,
-) -> i64 {
-    let one = |(index, p): (usize, &Point3<f64>)| {
-        let evidence = placed.evidence(p, band, band, links);
-        if on_floor.get(index).copied().unwrap_or(false) {
-            evidence.min(0)
-        } else {
-            evidence
-        }
-    };
     if parallel {
-        sample.par_iter().enumerate().map(one).sum()
+        sample
+            .par_iter()
+            .map(|p| placed.evidence(p, band, band, links))
+            .sum()
     } else {
-        sample.iter().enumerate().map(one).sum()
+        sample
+            .iter()
+            .map(|p| placed.evidence(p, band, band, links))
+            .sum()
     }
 }
 
