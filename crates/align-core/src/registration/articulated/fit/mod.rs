@@ -6,11 +6,12 @@
 //!    spurious returns along its rays and the mixed pixels streaked across a depth gap are.
 //! 1. Base hypotheses: the whole robot at the start joints aligned as one rigid part with Point
 //!    Cloud Alignment (its filters, weights, schedule and exploration); and, when delta exceeds
-//!    three quarters of the proximal links' radius, the best few rigid alignments of the
-//!    proximal links (the base and what only the first joint moves), which do not depend on
-//!    the other joints: from runs that start at the start turned (the exploration) and at
-//!    translations of it on a grid, screened (the start may be off by more than those links
-//!    are big, and a run in a band that wide settles on whatever else it holds).
+//!    a third of the proximal links' radius and the start is not near, the best few rigid
+//!    alignments of the proximal links (the base and what only the first joint moves), which
+//!    do not depend on the other joints: from runs that start at the start turned (the
+//!    exploration) and at translations of it on a grid, screened (the start may be off by more
+//!    than those links are big, and a run in a band that wide settles on whatever else it
+//!    holds).
 //! 2. Down the tree, a beam search: each joint's value by a 1-D search (coarse grid, then fine
 //!    around each of the best local maxima) scored by how many scan points the links it moves
 //!    explain (points buried inside a link count against it; points another link explains
