@@ -186,3 +186,17 @@ fn the_abb_base_the_whole_robot_lifted_off_the_floor_at_200_mm_is_found() {
     };
     no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 77, 2, 0.2, &[5]);
 }
+
+/// In scene 0 of seed 91 (the robot at home) at 500 mm, trials 2, 3, 4 and 7 lost the base:
+/// the beam kept the base hypotheses set down on the floor beside the robot, whose undersides
+/// explained 87 floor keypoints of its 3000 (and 27 others) against the truth's 97 others, and
+/// dropped the true place after the first joint (a probe, not kept). At 200 mm trial 5 lost it
+/// the same way. The floor's points now never count for the base in the beam's scores.
+#[test]
+fn the_abb_base_set_down_on_the_floor_beside_its_place_is_not_taken_for_it() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 91, 0, 0.5, &[2]);
+    no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 91, 0, 0.2, &[5]);
+}

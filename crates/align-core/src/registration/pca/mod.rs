@@ -31,9 +31,9 @@ use self::exploration::{
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::matching::{Lookup, correspond, near_surface};
-pub use self::planes::without_floor_under;
 use self::planes::without_large_planes;
 pub use self::planes::without_large_planes as without_planes_larger_than;
+pub use self::planes::{floor_plane, on_a_plane, without_floor_under};
 use self::polish::polish;
 pub use self::schedule::{DeltaSchedule, WideBandMatching};
 use self::schedule::{

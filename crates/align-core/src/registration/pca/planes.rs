@@ -85,22 +85,35 @@ pub fn without_floor_under(
     mesh: &Mesh,
     voxel_m: f64,
 ) -> Vec<Point3<f64>> {
+    if let Some(floor) = floor_plane(&coarse, mesh, voxel_m) {
+        coarse.retain(|p| !on_a_plane(p, std::slice::from_ref(&floor)));
+    }
+    coarse
+}
+
+/// The floor under the scan, as [`without_floor_under`] finds it (a point on it and its unit
+/// normal): the plane holding the most of `coarse` (keypoints one per voxel of `voxel_m`), when
+/// it holds more than [`LARGER_THAN_PART`] times the largest flat face of `mesh` could and
+/// nearly all the scan lies on one side of it. `None` when no plane is such a floor.
+pub fn floor_plane(
+    coarse: &[Point3<f64>],
+    mesh: &Mesh,
+    voxel_m: f64,
+) -> Option<(Point3<f64>, Vector3<f64>)> {
     let most_keypoints = LARGER_THAN_PART * largest_face_area_m2(mesh) / (voxel_m * voxel_m);
     let mut rng = SplitMix64::new(0x5851_f42d_4c95_7f2d ^ coarse.len() as u64);
-    let Some(mut plane) = largest_plane_by_neighbours(&coarse, &mut rng) else {
-        return coarse;
-    };
+    let mut plane = largest_plane_by_neighbours(coarse, &mut rng)?;
     // Three points a few centimetres apart tilt the plane by their noise: metres away it leaves
     // the band. A least-squares plane through the points on it does not.
     for _ in 0..REFITS {
-        match refit(&coarse, &plane) {
+        match refit(coarse, &plane) {
             Some(refitted) => plane = refitted,
             None => break,
         }
     }
     let (origin, normal) = plane;
     let (mut on, mut above, mut below) = (0_usize, 0_usize, 0_usize);
-    for p in &coarse {
+    for p in coarse {
         let height_m = (p - origin).dot(&normal);
         match height_m {
             h if h.abs() <= ON_PLANE_M => on += 1,
@@ -109,10 +122,8 @@ pub fn without_floor_under(
         }
     }
     let beyond = above.min(below) as f64;
-    if (on as f64) > most_keypoints && beyond <= BEYOND_FLOOR * (above + below) as f64 {
-        coarse.retain(|p| (p - origin).dot(&normal).abs() > ON_PLANE_M);
-    }
-    coarse
+    ((on as f64) > most_keypoints && beyond <= BEYOND_FLOOR * (above + below) as f64)
+        .then_some(plane)
 }
 
 /// The share of a scan's points off the floor allowed on its far side: stray returns and
@@ -226,7 +237,7 @@ fn most_supported_plane(
 }
 
 /// Whether `point` lies on one of `planes`.
-pub(super) fn on_a_plane(point: &Point3<f64>, planes: &[(Point3<f64>, Vector3<f64>)]) -> bool {
+pub fn on_a_plane(point: &Point3<f64>, planes: &[(Point3<f64>, Vector3<f64>)]) -> bool {
     planes
         .iter()
         .any(|(origin, normal)| (point - origin).dot(normal).abs() <= ON_PLANE_M)
@@ -301,6 +312,11 @@ mod tests {
             without_large_planes(points.clone(), &part, 0.015).len(),
             floor_and_cube
         );
+        let (origin, normal) = floor_plane(&points, &part, 0.015).expect("a floor");
+        assert!(
+            normal.z.abs() > 1.0 - 1e-6 && origin.z.abs() < 1e-9,
+            "{origin} {normal}"
+        );
         assert_eq!(without_floor_under(points, &part, 0.015), cube);
     }
 
@@ -310,6 +326,7 @@ mod tests {
         let part = Mesh::cuboid([0.4, 0.4, 0.4]).unwrap();
         let mut points = grid(60, 0.015, |u, v| Point3::new(u - 0.45, v - 0.45, 0.0));
         points.extend(standing_cube().iter().map(|p| p - Vector3::z() * 0.2));
+        assert_eq!(floor_plane(&points, &part, 0.015), None);
         let count = points.len();
         assert_eq!(without_floor_under(points, &part, 0.015).len(), count);
     }

@@ -7,9 +7,10 @@ use rayon::prelude::*;
 use super::RobotFitOptions;
 use super::context::FitContext;
 use super::joint_search::Candidate;
-use super::placed::coverage;
+use super::placed::{Placed, coverage_beside_floor};
 use super::refine::{Refinement, SETTLE_DAMPING, refine, refine_links};
 use super::tree::search_order;
+use crate::registration::pca::on_a_plane;
 
 /// Iterations of the refinement of the decided links after each joint of the beam search.
 const SETTLE_ITERATIONS: usize = 6;
@@ -47,6 +48,7 @@ impl FitContext<'_> {
             scan,
             global,
             near,
+            floor,
             options,
             ..
         } = *self;
@@ -59,6 +61,24 @@ impl FitContext<'_> {
         let stride = scan.coarse.len().div_ceil(BEAM_SCORE_POINTS).max(1);
         let sample: Vec<Point3<f64>> = scan.coarse.iter().step_by(stride).copied().collect();
         let band = 3.0 * options.voxel_m;
+        let on_floor: Vec<bool> = match &floor {
+            Some(plane) => sample
+                .iter()
+                .map(|p| on_a_plane(p, std::slice::from_ref(plane)))
+                .collect(),
+            None => Vec::new(),
+        };
+        // The states are ranked on what their links explain off the floor.
+        let score = |base: &Isometry3<f64>, q: &[f64], links: &[usize]| {
+            coverage_beside_floor(
+                &Placed::new(body, base, q),
+                &sample,
+                &on_floor,
+                links,
+                band,
+                options.parallel,
+            )
+        };
         let with_surface: Vec<usize> = (0..body.links().len())
             .filter(|&l| body.links()[l].surface.is_some())
             .collect();
@@ -128,11 +148,7 @@ impl FitContext<'_> {
                         },
                     );
                 }
-                (
-                    coverage(body, &sample, &base, &q, &decided, band, options.parallel),
-                    base,
-                    q,
-                )
+                (score(&base, &q, &decided), base, q)
             };
             let mut scored: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
                 next.into_par_iter().map(settle_one).collect()
@@ -172,16 +188,7 @@ impl FitContext<'_> {
                 &refine_options,
                 false,
             );
-            let score = coverage(
-                body,
-                &sample,
-                &base,
-                &q,
-                &with_surface,
-                band,
-                options.parallel,
-            );
-            (score, base, q)
+            (score(&base, &q, &with_surface), base, q)
         };
         let ranked: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
             beam.into_par_iter().map(rank).collect()

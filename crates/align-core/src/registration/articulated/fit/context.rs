@@ -1,6 +1,6 @@
 //! What every stage of one fit reads, carried in one place instead of long argument lists.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 use super::RobotFitOptions;
 use crate::registration::articulated::body::ArticulatedBody;
@@ -32,5 +32,9 @@ pub(super) struct FitContext<'a> {
     /// beam search keeps fewer states, and a joint that spins its own links in place keeps its
     /// value.
     pub(super) near: bool,
+    /// The floor under the scan (a point on it and its unit normal), found when the start is
+    /// not near: its points never count for a link in the beam's scores (see
+    /// [`super::placed::coverage_beside_floor`]).
+    pub(super) floor: Option<(Point3<f64>, Vector3<f64>)>,
     pub(super) options: &'a RobotFitOptions,
 }

@@ -21,7 +21,9 @@
 //!    lacked. After each joint the decided links (those every joint above has been searched
 //!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
 //!    decided links explain the most points go on: a joint misled by links below it that are
-//!    still far off survives as a runner-up until those links decide.
+//!    still far off survives as a runner-up until those links decide. Away from a near start
+//!    the floor's points never count for the base in those scores (a base set down on the
+//!    floor beside its place explains the floor under it).
 //! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
 //!    cos-weighted points within a band that shrinks to `band_min_m`, each point assigned to
 //!    its nearest link surface; the joints are searched once more near the answer
@@ -82,6 +84,8 @@ mod checks;
 mod context;
 mod contrast;
 mod distal;
+#[cfg(test)]
+mod floor_tests;
 mod global_search;
 mod joint_search;
 mod options;
@@ -98,7 +102,7 @@ use nalgebra::{Isometry3, Point3};
 
 use super::body::ArticulatedBody;
 use crate::geometry::Mesh;
-use crate::registration::pca::{PcaError, PcaOptions, align_cloud_pose};
+use crate::registration::pca::{PcaError, PcaOptions, align_cloud_pose, floor_plane};
 use crate::registration::sampling::{voxel_representatives, without_isolated};
 use base::round_base_axis;
 use context::{FitContext, Keypoints};
@@ -238,12 +242,21 @@ pub fn align_robot(
             .map_err(RobotFitError::Base)?,
         None => *world_from_root_start,
     };
+    // The floor's points, which a base set down on the floor beside its place explains as well
+    // as its own, never count for the base in the beam's scores. A near start has one base
+    // hypothesis, the whole robot's alignment, and no other place of the base to weigh
+    // against it: its fit does without the plane search.
+    let floor = start_mesh
+        .as_ref()
+        .filter(|_| !near_start)
+        .and_then(|mesh| floor_plane(&coarse, mesh, 3.0 * options.voxel_m));
     let fit = FitContext {
         body,
         scan,
         delta_m,
         global,
         near: near_start,
+        floor,
         options,
     };
     let round_base = round_base_axis(body, q0, options);

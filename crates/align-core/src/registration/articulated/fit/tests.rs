@@ -144,6 +144,7 @@ fn a_square_base_turned_with_joint_1_making_up_for_it_is_turned_back() {
         delta_m: 0.5,
         global: false,
         near: false,
+        floor: None,
         options: &options,
     };
     fit.base_turn_check(&mut base, &mut q);
@@ -428,6 +429,7 @@ fn with_keyed_wrist_scan<R>(
         delta_m: 0.5,
         global,
         near: false,
+        floor: None,
         options: &options,
     })
 }
@@ -595,7 +597,7 @@ fn a_point_outside_the_swept_tubes_counts_nothing_at_any_value() {
 }
 
 /// The forked-wrist robot and the index of its base link (a 0.4 m box from z = 0 to 0.3).
-fn forked_wrist_and_its_base() -> (ArticulatedBody, usize) {
+pub(super) fn forked_wrist_and_its_base() -> (ArticulatedBody, usize) {
     let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
     let body = ArticulatedBody::from_model(&model).unwrap();
     let base = (0..body.links().len())

@@ -1,0 +1,57 @@
+//! Unit tests of the beam's scores beside the floor (see [`super::placed::coverage_beside_floor`]).
+
+use nalgebra::{Isometry3, Point3};
+
+use super::placed::{Placed, coverage_beside_floor};
+use super::tests::forked_wrist_and_its_base;
+
+/// A base set down on the floor away from where it stands explains the floor's points under
+/// its footprint: with the floor's points marked, they no longer count for it, and a base sunk
+/// into the floor still counts them against it. The other links keep the floor's points.
+#[test]
+fn the_floor_under_a_base_set_down_elsewhere_does_not_count_for_it() {
+    let (body, base) = forked_wrist_and_its_base();
+    let column = (0..body.links().len())
+        .find(|&l| body.links()[l].name == "column")
+        .unwrap();
+    let q = [0.0; 6];
+    let step_m = 0.015;
+    let band = step_m;
+    // The base (a 0.4 m box from z = 0 to 0.3) stands at the origin; the scan shows one of its
+    // sides (x = 0.2) and a 2 m floor round it, none of the floor under it.
+    let mut sample: Vec<Point3<f64>> = (0..27)
+        .flat_map(|i| (0..20).map(move |j| (i, j)))
+        .map(|(i, j)| Point3::new(0.2, -0.195 + i as f64 * step_m, 0.01 + j as f64 * step_m))
+        .collect();
+    let side = sample.len();
+    for i in 0..134 {
+        for j in 0..134 {
+            let floor = Point3::new(-1.0 + i as f64 * step_m, -1.0 + j as f64 * step_m, 0.0);
+            if floor.x.abs() > 0.2 || floor.y.abs() > 0.2 {
+                sample.push(floor);
+            }
+        }
+    }
+    let on_floor: Vec<bool> = (0..sample.len()).map(|i| i >= side).collect();
+    let score = |world_from_root: &Isometry3<f64>, on_floor: &[bool], links: &[usize]| {
+        let placed = Placed::new(&body, world_from_root, &q);
+        coverage_beside_floor(&placed, &sample, on_floor, links, band, false)
+    };
+    let standing = Isometry3::identity();
+    let elsewhere = Isometry3::translation(0.6, 0.3, 0.0);
+    // Counted alike, the floor under the base set down elsewhere outweighs the side it shows.
+    assert!(score(&elsewhere, &[], &[base]) > score(&standing, &[], &[base]));
+    assert!(score(&standing, &on_floor, &[base]) >= side as i64 - 30);
+    assert!(score(&elsewhere, &on_floor, &[base]) <= 0);
+    // Sunk 0.1 m into the floor, the base holds floor points deep inside: still against it.
+    let sunk = Isometry3::translation(0.6, 0.3, -0.1);
+    let sunk_score = score(&sunk, &on_floor, &[base]);
+    assert!(sunk_score < -500, "{sunk_score}");
+    // Lowered by its height, the column (the link above the base) stands on the floor: its
+    // underside keeps the floor's points, marked or not, alone or with the base.
+    let lowered = Isometry3::translation(0.6, 0.3, -0.3);
+    let column_alone = score(&lowered, &[], &[column]);
+    assert!(column_alone > 100, "{column_alone}");
+    assert_eq!(score(&lowered, &on_floor, &[column]), column_alone);
+    assert!(score(&lowered, &on_floor, &[base, column]) > 100);
+}
