@@ -33,7 +33,7 @@ pub(super) struct FitContext<'a> {
     /// value.
     pub(super) near: bool,
     /// The floor under the scan (a point on it and its unit normal), found when the start is
-    /// not near: its points never count for a link in the beam's scores (see
+    /// neither near nor global: its points never count for the base in the beam's scores (see
     /// [`super::placed::coverage_beside_floor`]).
     pub(super) floor: Option<(Point3<f64>, Vector3<f64>)>,
     pub(super) options: &'a RobotFitOptions,
