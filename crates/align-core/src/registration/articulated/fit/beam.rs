@@ -68,7 +68,9 @@ impl FitContext<'_> {
                 .collect(),
             None => Vec::new(),
         };
-        // The states are ranked on what their links explain off the floor.
+        // The states are ranked on what their links explain, the floor's points never counting
+        // for the base (see `coverage_beside_floor`; no floor is marked from a near or global
+        // start).
         let score = |base: &Isometry3<f64>, q: &[f64], links: &[usize]| {
             coverage_beside_floor(
                 &Placed::new(body, base, q),
