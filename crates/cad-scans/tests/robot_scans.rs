@@ -200,3 +200,17 @@ fn the_abb_base_set_down_on_the_floor_beside_its_place_is_not_taken_for_it() {
     no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 91, 0, 0.5, &[2]);
     no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 91, 0, 0.2, &[5]);
 }
+
+/// In scene 0 of seed 91 at 1000 mm, 8 of 10 trials lost the base, trials 0 and 1 among them.
+/// The detection dropped every reference's vote under a fifth of the best one's before merging
+/// them: the true base, a pose many references agree on with few votes each, was among none of
+/// the 117 poses left. With every vote merged it ranks 6th; and the beam dropped it all the same
+/// at the wrist, whose pair search found no point to score from the true base (a probe, not
+/// kept). Both fixed, the fit finds the robot in 10 of 10 trials there.
+#[test]
+fn the_abb_base_many_references_agree_on_with_few_votes_each_is_found_at_1000_mm() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 91, 0, 1.0, &[0, 1]);
+}

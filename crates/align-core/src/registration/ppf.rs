@@ -32,7 +32,9 @@ pub struct PpfOptions {
     pub turn_bins: usize,
     /// Scene points used as references, at most (a stride sample).
     pub max_references: usize,
-    /// Votes below this fraction of the best pose's are dropped.
+    /// A scene reference's vote below this fraction of the best reference's is dropped before
+    /// the votes are merged into poses (0 merges every vote). A pose that many references agree
+    /// on, each with few votes, goes with them.
     pub min_vote_fraction: f64,
 }
 

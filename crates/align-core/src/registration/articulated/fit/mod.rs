@@ -80,6 +80,8 @@
 
 mod base;
 mod beam;
+#[cfg(test)]
+mod beam_tests;
 mod checks;
 mod context;
 mod contrast;

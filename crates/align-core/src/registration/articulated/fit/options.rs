@@ -133,7 +133,17 @@ impl Default for RobotFitOptions {
                 schedule: DeltaSchedule::Cosine,
                 ..PcaOptions::default()
             },
-            detection: PpfOptions::default(),
+            // Every reference's vote is merged: the true base of a cluttered scan is a pose many
+            // references agree on, each with few votes of its own. With votes under a fifth of
+            // the best reference's dropped before merging (the default), the ABB IRB 1600's
+            // true base was among none of the 117 poses left in `robot-scans --seed 91` scene 0
+            // at 1000 mm; with every vote merged it ranks 6th of 737, and the fit finds it in
+            // 10 of 10 trials there (2 before). Merging a thousand more votes costs little
+            // beside the voting.
+            detection: PpfOptions {
+                min_vote_fraction: 0.0,
+                ..PpfOptions::default()
+            },
         }
     }
 }

@@ -1,0 +1,75 @@
+//! Unit tests of how the beam search goes from one joint's searches to its next states (see
+//! [`super::beam::next_states`]).
+
+use nalgebra::Isometry3;
+
+use super::RobotFitOptions;
+use super::beam::next_states;
+use super::joint_search::Candidate;
+
+fn candidate(
+    value: f64,
+    partner: Option<(usize, f64)>,
+    deferred: Option<(usize, f64)>,
+) -> Candidate {
+    Candidate {
+        value,
+        partner,
+        deferred,
+        score: 1,
+    }
+}
+
+/// A state whose search found nothing to score goes on as it was, beside the states the other
+/// searches led to; it was dropped, and a right base with it.
+#[test]
+fn a_state_whose_search_finds_nothing_goes_on_unchanged() {
+    let options = RobotFitOptions::default();
+    let wrist = 3;
+    let beam = vec![
+        (
+            Isometry3::translation(0.2, -0.1, 0.0),
+            vec![0.0, 0.3, 2.9, -0.4, 0.0],
+        ),
+        (
+            Isometry3::translation(0.0, -0.57, 0.0),
+            vec![-0.6, 1.1, -1.4, -0.4, 0.0],
+        ),
+    ];
+    let searched = vec![
+        Vec::new(),
+        vec![
+            candidate(0.7, Some((4, 1.5)), None),
+            candidate(1.4, None, Some((2, -1.2))),
+        ],
+    ];
+    let next = next_states(&beam, searched, wrist, &options).unwrap();
+    assert_eq!(next.len(), 3, "{next:?}");
+    assert!(next.contains(&beam[0]), "{next:?}");
+    // The other state's candidates, their partner's and deferred joint's values set.
+    assert!(next.contains(&(beam[1].0, vec![-0.6, 1.1, -1.4, 0.7, 1.5])));
+    assert!(next.contains(&(beam[1].0, vec![-0.6, 1.1, -1.2, 1.4, 0.0])));
+}
+
+/// A state reached twice (by two searches, or unchanged and by a search) is kept once; when no
+/// search found anything there are no next states (the joint is left undecided).
+#[test]
+fn states_reached_twice_are_kept_once_and_no_search_finding_anything_gives_none() {
+    let options = RobotFitOptions::default();
+    let base = Isometry3::translation(0.2, -0.1, 0.0);
+    let beam = vec![(base, vec![0.0, 0.5]), (base, vec![0.0, 0.9])];
+    let none = next_states(&beam, vec![Vec::new(), Vec::new()], 1, &options);
+    assert!(none.is_none());
+    // The second state's search leads to the first state's value; the first found nothing.
+    let next = next_states(
+        &beam,
+        vec![
+            Vec::new(),
+            vec![candidate(0.5, None, None), candidate(0.5, None, None)],
+        ],
+        1,
+        &options,
+    )
+    .unwrap();
+    assert_eq!(next, vec![(base, vec![0.0, 0.5])]);
+}
