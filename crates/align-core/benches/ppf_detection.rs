@@ -10,7 +10,8 @@
 //! without the planes larger than the proximal links (as the fit detects since the eighteenth
 //! session), the proximal links and the base alone, which the fit detects instead (the ABB's
 //! base is not round), and the base alone in that scan without the floor under it too (as the
-//! fit detects it since the nineteenth session).
+//! fit detects it since the nineteenth session), and that with every reference's vote merged
+//! (`min_vote_fraction` 0, as the fit detects since the twenty-ninth session).
 //! Run: cargo bench -p align-core --bench ppf_detection [-- --runs N]
 
 use std::time::Instant;
@@ -48,6 +49,10 @@ fn runs_argument() -> usize {
 fn main() {
     let runs = runs_argument();
     let options = PpfOptions::default();
+    let every_vote = PpfOptions {
+        min_vote_fraction: 0.0,
+        ..options.clone()
+    };
     println!("{runs} detections per case, 4 poses asked, search ball 2 m about the true root");
     println!(
         "| case | triangles | poses | best pose's centroid error mm | min ms | median ms | max ms |"
@@ -81,9 +86,14 @@ fn main() {
         let all: Vec<usize> = (0..body.links().len()).collect();
         let proximal = body.rigid_mesh_of(&home, &first_movers);
         let (without_planes, without_floor, above_floor);
-        let mut objects = vec![("proximal links", proximal.clone(), &cloud)];
+        let mut objects = vec![("proximal links", proximal.clone(), &cloud, &options)];
         if with_whole {
-            objects.push(("whole robot", body.rigid_mesh_of(&home, &all), &cloud));
+            objects.push((
+                "whole robot",
+                body.rigid_mesh_of(&home, &all),
+                &cloud,
+                &options,
+            ));
         } else {
             // The scene as the fit detects in it since the eighteenth session: without the
             // planes larger than the proximal links, at the detection's step. Against it, the
@@ -112,25 +122,35 @@ fn main() {
                     "proximal links, no plane larger than them",
                     proximal,
                     &without_planes,
+                    &options,
                 ),
                 (
                     "base alone, no plane larger than the proximal links",
                     base_alone.clone(),
                     &without_planes,
+                    &options,
                 ),
                 (
                     "base alone, no plane larger than the proximal links nor the floor under it",
                     base_alone.clone(),
                     &without_floor,
+                    &options,
+                ),
+                (
+                    "base alone, as above, every reference's vote merged",
+                    base_alone.clone(),
+                    &without_floor,
+                    &every_vote,
                 ),
                 (
                     "base alone, floor cut at its known height",
                     base_alone,
                     &above_floor,
+                    &options,
                 ),
             ]);
         }
-        for (what, mesh, cloud) in objects {
+        for (what, mesh, cloud, options) in objects {
             let Some(mesh) = mesh else {
                 continue;
             };
@@ -140,7 +160,7 @@ fn main() {
             let mut poses = Vec::new();
             for _ in 0..runs {
                 let clock = Instant::now();
-                poses = ppf_poses(&mesh, cloud, &centre, 2.0, &options, 4, 0.3);
+                poses = ppf_poses(&mesh, cloud, &centre, 2.0, options, 4, 0.3);
                 times_ms.push(clock.elapsed().as_secs_f64() * 1e3);
             }
             times_ms.sort_by(f64::total_cmp);
