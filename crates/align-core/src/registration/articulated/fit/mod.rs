@@ -21,7 +21,8 @@
 //!    lacked. After each joint the decided links (those every joint above has been searched
 //!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
 //!    decided links explain the most points go on: a joint misled by links below it that are
-//!    still far off survives as a runner-up until those links decide. From a start neither
+//!    still far off survives as a runner-up until those links decide; a state whose search
+//!    finds nothing to score goes on with the joint where it is. From a start neither
 //!    near nor global the floor's points never count for the base in those scores (a base set
 //!    down on the floor beside its place explains the floor under it).
 //! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
@@ -64,8 +65,8 @@
 //! When delta exceeds the robot's radius (at the start joints) the start is not local: the
 //! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
 //! half turn. Two stages then change. The proximal links are detected anywhere the root may be
-//! by point pair features ([`crate::registration::ppf`]) instead of slid into place from the
-//! start; and each joint is searched together with its child on a grid fine enough that the
+//! by point pair features ([`crate::registration::ppf`], every reference's vote merged) instead
+//! of slid into place from the start; and each joint is searched together with its child on a grid fine enough that the
 //! value nearest the truth puts their links within the band, scored only on the links those
 //! two place (a joint whose two links turn in place about it, an upper arm standing on the
 //! axis of a round shoulder, is searched after its child, together with its grandchild).
