@@ -101,3 +101,34 @@ fn bad_fri_inputs_exit_2_with_a_reason() {
         .collect();
     assert_refused(env!("CARGO_BIN_EXE_robot-bridge"), &cases);
 }
+
+#[test]
+fn a_controller_silence_limit_out_of_range_exits_2_with_a_reason() {
+    let iiwa = |value: &'static str| -> Vec<&'static str> {
+        vec![
+            "--backend",
+            "iiwa",
+            "--robot-host",
+            "127.0.0.1",
+            "--fri-port",
+            "0",
+            "--rep",
+            "tcp://127.0.0.1:*",
+            "--pub",
+            "tcp://127.0.0.1:*",
+            "--fri-silence-ms",
+            value,
+        ]
+    };
+    let owned_cases = [
+        (iiwa("0"), "--fri-silence-ms"),
+        (iiwa("60001"), "60001"),
+        (iiwa("nan"), "nan"),
+        (iiwa("-5"), "--fri-silence-ms"),
+    ];
+    let cases: Vec<(&[&str], &str)> = owned_cases
+        .iter()
+        .map(|(args, reason)| (args.as_slice(), *reason))
+        .collect();
+    assert_refused(env!("CARGO_BIN_EXE_robot-bridge"), &cases);
+}

@@ -34,6 +34,7 @@ fn iiwa_bridge_with_inputs(inputs: Vec<(String, DigitalInput)>) -> Handle {
             robot_host: "127.0.0.1".to_owned(),
             fri_port: 0,
             inputs,
+            min_silence_ms: robot_bridge::backend::iiwa::DEFAULT_MIN_SILENCE_MS,
         }),
         rep: "tcp://127.0.0.1:*".to_owned(),
         publish: "tcp://127.0.0.1:*".to_owned(),
@@ -146,7 +147,8 @@ impl Cell for IiwaCell {
     /// Differentiated over one send period: a backward difference, within |q''| * period / 2 of
     /// the true velocity.
     const VELOCITY_TOLERANCE: f64 = 0.01;
-    const LOSS_REASON: &'static [&'static str] = &["no FRI message", "3 send periods of 5 ms"];
+    const LOSS_REASON: &'static [&'static str] =
+        &["no FRI message", "limit 100 ms", "3 send periods of 5 ms"];
 
     fn start() -> Self {
         Self::with_send_period(5)

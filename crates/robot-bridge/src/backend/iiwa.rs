@@ -11,7 +11,10 @@
 //! timed wait is precise where a socket receive timeout only counts scheduler ticks (4 ms),
 //! too coarse for a 1 ms controller.
 //!
-//! The controller counts as lost after three send periods without a message; a message after
+//! The controller counts as lost after three send periods without a message, and never sooner
+//! than [`IiwaConfig::min_silence_ms`] (100 ms by default): the bridge runs on a host without a
+//! real-time scheduler, where a stall of a few milliseconds is the host's, not a lost controller
+//! (the messages it hid are still counted as missed by their sequence counter). A message after
 //! that, or from a new session (its sequence counter started over), reconnects. Datagrams from
 //! another host than `--robot-host`, and datagrams that are not LBR monitoring messages, are
 //! counted and dropped.
@@ -38,6 +41,9 @@ use super::{Backend, BackendKind, BackendSettings, Event, LinkState, OpenError, 
 
 /// Send periods of silence after which the controller counts as lost.
 pub const SILENT_PERIODS: u32 = 3;
+/// The shortest silence that counts as a lost controller by default (ms), whatever the send
+/// period: scheduler stalls on a loaded, non-real-time host reach tens of milliseconds.
+pub const DEFAULT_MIN_SILENCE_MS: u64 = 100;
 /// Assumed until the controller states its send period.
 const DEFAULT_SEND_PERIOD: Duration = Duration::from_millis(5);
 /// The UDP port Sunrise's FRI sends to by default.
@@ -53,6 +59,9 @@ pub struct IiwaConfig {
     /// FRI IOs to publish as digital inputs: each registered IO's name (`Group.Name`) and the
     /// hwState input it becomes.
     pub inputs: Vec<(String, DigitalInput)>,
+    /// The shortest silence (ms) that counts as a lost controller; the limit is the longer of
+    /// this and [`SILENT_PERIODS`] send periods.
+    pub min_silence_ms: u64,
 }
 
 impl BackendSettings for IiwaConfig {
@@ -72,6 +81,7 @@ impl BackendSettings for IiwaConfig {
             }
         })?;
         backend.inputs = self.inputs.clone();
+        backend.min_silence = Duration::from_millis(self.min_silence_ms);
         Ok(Box::new(backend))
     }
 }
@@ -103,6 +113,8 @@ pub struct IiwaBackend {
     inputs: Vec<(String, DigitalInput)>,
     /// Why the inputs were last left out, logged once per reason.
     inputs_problem: Option<String>,
+    /// The shortest silence that counts as a lost controller ([`IiwaConfig::min_silence_ms`]).
+    min_silence: Duration,
 }
 
 /// The controller as last heard.
@@ -151,6 +163,7 @@ impl IiwaBackend {
             receiver_gone: false,
             inputs: Vec::new(),
             inputs_problem: None,
+            min_silence: Duration::from_millis(DEFAULT_MIN_SILENCE_MS),
         })
     }
 
@@ -393,15 +406,17 @@ impl Backend for IiwaBackend {
             let now = Instant::now();
             let mut wait = timeout.saturating_sub(now - started);
             if let Some(session) = &self.session {
-                let silence_limit = session.send_period * SILENT_PERIODS;
+                let silence_limit = (session.send_period * SILENT_PERIODS).max(self.min_silence);
                 let silent = now.saturating_duration_since(session.last_message);
                 if silent >= silence_limit {
                     let period_ms = session.send_period.as_secs_f64() * 1e3;
                     self.session = None;
                     return Some(Event::Lost {
                         reason: format!(
-                            "no FRI message for {:.1} ms ({SILENT_PERIODS} send periods of {period_ms} ms)",
-                            silent.as_secs_f64() * 1e3
+                            "no FRI message for {:.1} ms (limit {} ms: the longer of {SILENT_PERIODS} send periods of {period_ms} ms and {} ms)",
+                            silent.as_secs_f64() * 1e3,
+                            silence_limit.as_millis(),
+                            self.min_silence.as_millis()
                         ),
                     });
                 }

@@ -2,7 +2,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, ValueEnum};
 use protocol::DigitalInput;
-use robot_bridge::backend::iiwa::{DEFAULT_FRI_PORT, IiwaConfig};
+use robot_bridge::backend::iiwa::{DEFAULT_FRI_PORT, DEFAULT_MIN_SILENCE_MS, IiwaConfig};
 use robot_bridge::backend::ur::{DEFAULT_PRIMARY_PORT, DEFAULT_RTDE_PORT, UrConfig};
 use robot_bridge::{BackendConfig, Config};
 use signal_hook::consts::{SIGINT, SIGTERM};
@@ -84,6 +84,17 @@ struct IiwaArgs {
     /// (Group.Name); INPUT one of DI0-DI7, CI0-CI7, TI0-TI1.
     #[arg(long = "fri-input", value_name = "NAME=INPUT", value_parser = parse_fri_input)]
     fri_inputs: Vec<(String, DigitalInput)>,
+    /// The shortest silence, in ms (1-60000), after which the controller counts as lost; the
+    /// limit is the longer of this and 3 send periods. Below 100 ms a busy host's scheduler
+    /// stall can pass for a lost controller.
+    #[arg(
+        long = "fri-silence-ms",
+        value_name = "MS",
+        default_value_t = DEFAULT_MIN_SILENCE_MS,
+        value_parser = clap::value_parser!(u64).range(1..=60_000),
+        allow_negative_numbers = true,
+    )]
+    fri_min_silence_ms: u64,
 }
 
 /// `Group.Name=DI0`: an FRI IO and the digital input it becomes.
@@ -145,6 +156,7 @@ impl Args {
                 robot_host,
                 fri_port: self.iiwa.fri_port,
                 inputs: self.iiwa.fri_inputs,
+                min_silence_ms: self.iiwa.fri_min_silence_ms,
             }),
         };
         Config {
