@@ -214,3 +214,15 @@ fn the_abb_base_many_references_agree_on_with_few_votes_each_is_found_at_1000_mm
     };
     no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 91, 0, 1.0, &[0, 1]);
 }
+
+/// In scene 1 of robot-scans' default seed at 1000 mm, trial 4 left joint 5 0.43 rad off, where
+/// the scan does not pin it (the report set it unseen); the true value, which the scan pins,
+/// explained 6.8 graded keypoints more of 65, short of the 8 the distal sweep asks between two
+/// values. A value the scan pins is now taken over one it does not, for a gain of 4.
+#[test]
+fn the_abb_wrist_the_scan_pins_is_taken_over_one_it_does_not_at_1000_mm() {
+    let Some(body) = abb_irb1600() else {
+        return;
+    };
+    no_link_fails(&body, &ABB_TRIAL_HOME, 1, 1.0, &[4]);
+}
