@@ -62,7 +62,8 @@ impl FitContext<'_> {
     /// queries, about every coarse value within the coarse scores' noise of their best, the
     /// best [`FINE_CENTRES`] coarse peaks and the state. The best value,
     /// when it scores above the state by [`sweep_gain_needed`], is refined and kept when it
-    /// still scores that much more on the same keypoints. A joint whose state leaves fewer
+    /// still scores that much more on the same keypoints; or by [`PINNED_GAIN_MIN`] when the
+    /// fine keypoints pin the joint there and not at the state (`pins`). A joint whose state leaves fewer
     /// free points unexplained than that gain is not swept at all. Returns the iterations
     /// spent.
     ///

@@ -47,8 +47,9 @@
 //! 6. The joints of the small links at the end of the chain (reaching at most 0.15 m from the
 //!    axis, with at most 1500 fine keypoints near them that no other link explains: a wrist and
 //!    its flange) are swept over a whole turn, coarse on the distance grids and then densely in
-//!    a narrow band about the coarse peaks (`distal_sweep`), and everything is refined once
-//!    more in a band
+//!    a narrow band about the coarse peaks (`distal_sweep`; a value is taken when it explains
+//!    more by the square root of what the state explains, or by 4 where the scan pins the
+//!    joint and does not pin it at the state), and everything is refined once more in a band
 //!    of `polish_band_m` (5 mm), which the mixed pixels beside a small link's silhouette mostly
 //!    miss.
 //!
