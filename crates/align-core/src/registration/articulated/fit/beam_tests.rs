@@ -4,7 +4,7 @@
 use nalgebra::Isometry3;
 
 use super::RobotFitOptions;
-use super::beam::next_states;
+use super::beam::{leaves_windows, next_states};
 use super::joint_search::Candidate;
 
 fn candidate(
@@ -72,4 +72,17 @@ fn states_reached_twice_are_kept_once_and_no_search_finding_anything_gives_none(
     )
     .unwrap();
     assert_eq!(next, vec![(base, vec![0.0, 0.5])]);
+}
+
+/// A refinement that turns a joint farther than its window leaves what the start allows; one
+/// that stays within every window, or moves a joint without a placed axis, does not.
+#[test]
+fn a_joint_turned_past_its_window_leaves_it() {
+    let halves = [0.8, 0.3, f64::INFINITY];
+    let before = [-0.45, 1.8, 0.2];
+    // The ABB's forearm roll turned by 1.9 rad where delta allowed 0.8.
+    assert!(leaves_windows(&before, &[-2.35, 1.78, 0.9], &halves));
+    assert!(leaves_windows(&before, &[-0.45, 2.2, 0.2], &halves));
+    assert!(!leaves_windows(&before, &[0.3, 1.55, 5.0], &halves));
+    assert!(!leaves_windows(&before, &before, &halves));
 }

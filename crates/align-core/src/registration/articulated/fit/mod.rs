@@ -22,7 +22,9 @@
 //!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
 //!    decided links explain the most points go on: a joint misled by links below it that are
 //!    still far off survives as a runner-up until those links decide; a state whose search
-//!    finds nothing to score goes on with the joint where it is. From a start neither
+//!    finds nothing to score goes on with the joint where it is. The survivors are ranked after
+//!    a few refinement steps, a survivor whose steps took a joint out of its window as it was
+//!    before them. From a start neither
 //!    near nor global the floor's points never count for the base in those scores (a base set
 //!    down on the floor beside its place explains the floor under it).
 //! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
