@@ -63,9 +63,9 @@ impl FitContext<'_> {
     /// best [`FINE_CENTRES`] coarse peaks and the state. The best value,
     /// when it scores above the state by [`sweep_gain_needed`], is refined and kept when it
     /// still scores that much more on the same keypoints; or by [`PINNED_GAIN_MIN`] when the
-    /// fine keypoints pin the joint there and not at the state (`pins`). A joint whose state leaves fewer
-    /// free points unexplained than that gain is not swept at all. Returns the iterations
-    /// spent.
+    /// fine keypoints pin the joint there and not at the state (`pins`). A joint whose state
+    /// leaves fewer free points unexplained than the square root's gain is not swept at all.
+    /// Returns the iterations spent.
     ///
     /// Coarse to fine because the whole turn in narrow steps from exact queries cost the UR10's
     /// fit at 100 mm a third to a half more time (its two wrist joints: 260 and 150 values on 460
