@@ -69,10 +69,11 @@
 //! robot may be turned by more than a radian and each joint be anywhere in a window of up to a
 //! half turn. Two stages then change. The proximal links are detected anywhere the root may be
 //! by point pair features ([`crate::registration::ppf`], every reference's vote merged) instead
-//! of slid into place from the start; and each joint is searched together with its child on a grid fine enough that the
-//! value nearest the truth puts their links within the band, scored only on the links those
-//! two place (a joint whose two links turn in place about it, an upper arm standing on the
-//! axis of a round shoulder, is searched after its child, together with its grandchild).
+//! of slid into place from the start; and each joint is searched together with its child on a
+//! grid fine enough that the value nearest the truth puts their links within the band, scored
+//! only on the links those two place (a joint whose two links turn in place about it, an upper
+//! arm standing on the axis of a round shoulder, is searched after its child, together with its
+//! grandchild).
 //!
 //! The searches and every refinement but the last ask each link's signed-distance grid (5 mm
 //! cells, built once with the [`ArticulatedBody`]) instead of its mesh: a few memory reads
