@@ -228,9 +228,7 @@ impl FitContext<'_> {
         }
         iterations
     }
-}
 
-impl FitContext<'_> {
     /// Whether the fine keypoints pin `parameter` with the robot at `world_from_root` and `q`:
     /// what the fit's report would call it observed (`report::final_state`).
     fn pins(&self, world_from_root: &Isometry3<f64>, q: &[f64], parameter: usize) -> bool {
