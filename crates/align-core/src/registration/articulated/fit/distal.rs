@@ -62,8 +62,9 @@ impl FitContext<'_> {
     /// queries, about every coarse value within the coarse scores' noise of their best, the
     /// best [`FINE_CENTRES`] coarse peaks and the state. The best value,
     /// when it scores above the state by [`sweep_gain_needed`], is refined and kept when it
-    /// still scores that much more on the same keypoints; or by [`PINNED_GAIN_MIN`] when the
-    /// fine keypoints pin the joint there and not at the state (`pins`). A joint whose state
+    /// still scores that much more on the same keypoints; or by [`PINNED_GAIN_MIN`], or by a
+    /// gain most free keypoints agree on (`consistent_gain`), when the fine keypoints pin the
+    /// joint there and not at the state (`pins`). A joint whose state
     /// leaves fewer free points unexplained than the square root's gain is not swept at all.
     /// Returns the iterations spent.
     ///
@@ -121,6 +122,12 @@ impl FitContext<'_> {
                 continue;
             }
             // The free points' grades in `band`, with the links at `root` and `joints`.
+            let grades_in = |root: &Isometry3<f64>, joints: &[f64], band: f64| -> Vec<f64> {
+                let at = Placed::new(body, root, joints);
+                free.iter()
+                    .map(|p| at.closeness(p, band, band, &moved, Distances::Exact))
+                    .collect()
+            };
             let graded_in =
                 |root: &Isometry3<f64>, joints: &[f64], band: f64, distances: Distances| -> f64 {
                     let at = Placed::new(body, root, joints);
@@ -135,7 +142,8 @@ impl FitContext<'_> {
             };
             let score = |value: f64| graded_at(value, band, Distances::Exact);
             let current = q[parameter];
-            let here = score(current);
+            let here_grades = grades_in(world_from_root, q, band);
+            let here: f64 = here_grades.iter().sum();
             // A point grades at most 1: when even every free point at its best could not
             // gain what a swept value must, no value can, and the sweep would only cost
             // time. A converged wrist explains nearly all its points (the UR10's two wrist
@@ -197,10 +205,20 @@ impl FitContext<'_> {
             // Short of the gain, a value is still taken when the scan pins the joint there and
             // not where the state has it (`pins`).
             let by_pinning = best_score - here < needed;
-            if by_pinning
-                && (best_score - here < PINNED_GAIN_MIN || self.pins(world_from_root, q, parameter))
-            {
-                continue;
+            // The evidence the pinning rule asks of a value: a gain a count of keypoints would
+            // need, or one most free points agree on (`consistent_gain`).
+            let shown = |root: &Isometry3<f64>, joints: &[f64], gain: f64| {
+                gain >= PINNED_GAIN_MIN
+                    || consistent_gain(&here_grades, &grades_in(root, joints, band))
+            };
+            if by_pinning {
+                let mut at_best = q.clone();
+                at_best[parameter] = best;
+                if !shown(world_from_root, &at_best, best_score - here)
+                    || self.pins(world_from_root, q, parameter)
+                {
+                    continue;
+                }
             }
             let mut trial_root = *world_from_root;
             let mut trial_q = q.clone();
@@ -217,7 +235,7 @@ impl FitContext<'_> {
             // `here` is the state's own score: the sweep's value at the current one.
             let gain = graded_in(&trial_root, &trial_q, band, Distances::Exact) - here;
             let taken = if by_pinning {
-                gain >= PINNED_GAIN_MIN && self.pins(&trial_root, &trial_q, parameter)
+                shown(&trial_root, &trial_q, gain) && self.pins(&trial_root, &trial_q, parameter)
             } else {
                 gain >= needed
             };
@@ -286,8 +304,56 @@ pub(super) fn fine_values(centres: &[f64], reach: f64, step: f64, span: (f64, f6
         .collect()
 }
 
+/// Whether the free points' grades `to` gain on `from` consistently: the gain is at least
+/// [`CONSISTENT_GAIN_Z`] times the root of the summed squared per-point changes, the spread the
+/// gain would have if each point's change were as likely to go either way (a paired test). A
+/// gain of 3.75 on 100 points that 15 points make and 1 gives back passes (z 3.1); the same
+/// gain made by a few points moving a lot and others moving back does not.
+fn consistent_gain(from: &[f64], to: &[f64]) -> bool {
+    let (gain, squares) = from
+        .iter()
+        .zip(to)
+        .map(|(a, b)| b - a)
+        .fold((0.0, 0.0), |(sum, squares), d| (sum + d, squares + d * d));
+    gain > 0.0 && gain >= CONSISTENT_GAIN_Z * squares.sqrt()
+}
+
+/// The paired test's threshold (`consistent_gain`): three standard deviations.
+const CONSISTENT_GAIN_Z: f64 = 3.0;
+
 /// How much more a swept value's graded score ([`Placed::closeness`]) must be than the
 /// state's `score`: its square root, and at least 4 (as a count of keypoints would need).
 fn sweep_gain_needed(score: f64) -> f64 {
     score.max(0.0).sqrt().ceil().max(4.0)
+}
+
+#[cfg(test)]
+mod consistent_gain_tests {
+    use super::consistent_gain;
+
+    #[test]
+    fn a_gain_most_points_make_is_consistent_and_one_a_few_make_against_the_rest_is_not() {
+        // 100 points: 15 gain 0.25 each and one gives back 0.1 (gain 3.65, z 3.7).
+        let from = vec![0.5; 100];
+        let mut spread = from.clone();
+        for grade in &mut spread[..15] {
+            *grade += 0.25;
+        }
+        spread[15] -= 0.1;
+        assert!(consistent_gain(&from, &spread));
+        // Near the same gain from 4 points that gain 1 each while 3 others lose 0.1 each (z 1.8).
+        let mut few = from.clone();
+        for grade in &mut few[..4] {
+            *grade += 1.0;
+        }
+        for grade in &mut few[4..7] {
+            *grade -= 0.1;
+        }
+        assert!(!consistent_gain(&from, &few));
+        // No change, or a loss however consistent, is no gain.
+        assert!(!consistent_gain(&from, &from));
+        let lower: Vec<f64> = from.iter().map(|g| g - 0.1).collect();
+        assert!(!consistent_gain(&from, &lower));
+        assert!(consistent_gain(&lower, &from));
+    }
 }

@@ -50,10 +50,10 @@
 //!    axis, with at most 1500 fine keypoints near them that no other link explains: a wrist and
 //!    its flange) are swept over a whole turn, coarse on the distance grids and then densely in
 //!    a narrow band about the coarse peaks (`distal_sweep`; a value is taken when it explains
-//!    more by the square root of what the state explains, or by 4 where the scan pins the
-//!    joint and does not pin it at the state), and everything is refined once more in a band
-//!    of `polish_band_m` (5 mm), which the mixed pixels beside a small link's silhouette mostly
-//!    miss.
+//!    more by the square root of what the state explains, or, where the scan pins the joint
+//!    and does not pin it at the state, by 4 or by a gain most of the keypoints agree on), and
+//!    everything is refined once more in a band of `polish_band_m` (5 mm), which the mixed
+//!    pixels beside a small link's silhouette mostly miss.
 //!
 //! When delta is at most 0.18 of the robot's radius (at the start joints) the start is near:
 //! the searches from it settle every joint in its basin, so the beam keeps `near_beam_width`
