@@ -5,7 +5,9 @@
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rayon::prelude::*;
 
-use super::{Coarse, PcaOptions, consensus, run_schedule};
+use super::{
+    Coarse, PcaOptions, SAME_POSE_FRACTION_OF_RADIUS, Uniqueness, consensus, run_schedule,
+};
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
 use crate::registration::ppf::{PpfOptions, ppf_poses_where};
@@ -49,6 +51,10 @@ pub(super) struct Exploring<'a> {
     /// floor pulled thin parts flat into it (docs/cad-scan-trials.md: 128 against 136 of 200
     /// scans with them kept in every run).
     pub(super) runs_keep_planes: bool,
+    /// A run from the start itself, besides its turns. Off when the local stage runs from the
+    /// start instead (`PcaOptions::local_candidate`): it gets there at least as surely as a
+    /// short run on coarse keypoints, and both would cost a 50 mm alignment its time twice.
+    pub(super) from_start: bool,
 }
 
 impl Exploring<'_> {
@@ -58,6 +64,7 @@ impl Exploring<'_> {
         detected: &[],
         slack: 1.0,
         runs_keep_planes: true,
+        from_start: true,
     };
 }
 
@@ -171,7 +178,11 @@ pub(super) fn explore_turns(
     };
     let centre = mesh.centroid();
     let about_centre = Isometry3::translation(centre.x, centre.y, centre.z);
-    let mut candidates = vec![(*start, delta0_m)];
+    let mut candidates = if exploring.from_start {
+        vec![(*start, delta0_m)]
+    } else {
+        Vec::new()
+    };
     // Only orientations within the rotation delta allows (with margin) are tried: scaling a
     // spread set into that ball was tried and is worse, since the consensus score then prefers
     // poses that rest a large face on the floor plane.
@@ -217,7 +228,7 @@ pub(super) fn explore_turns(
         })
         .collect();
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-    (scored, candidates.len() - 1)
+    (scored, candidates.len() - usize::from(exploring.from_start))
 }
 
 /// Starts spread in translation that [`pose_candidates_spread`] screens, at most.
@@ -344,4 +355,37 @@ pub fn pose_candidates(
     let coarse = Coarse::new(mesh, cloud, options);
     let (scored, _) = explore(mesh, &coarse, start, delta0_m, options, Exploring::EXACT);
     distinct_poses(scored, count, mesh.radius_m(), distinct_m)
+}
+
+/// The pose against the best exploration end that is a different pose, scored alike.
+pub(super) fn uniqueness(
+    mesh: &Mesh,
+    coarse: &Coarse,
+    pose: &Isometry3<f64>,
+    ends: &[(f64, Isometry3<f64>)],
+) -> Option<Uniqueness> {
+    let same = SAME_POSE_FRACTION_OF_RADIUS * mesh.radius_m();
+    let centre = mesh.centroid();
+    let (runner_up_score, runner_up) = ends
+        .iter()
+        .filter(|(_, end)| {
+            // Apart by more than `same` at the centre or at the part's radius.
+            let shift = (end * centre - pose * centre).norm();
+            let turn = end.rotation.angle_to(&pose.rotation) * mesh.radius_m();
+            shift.max(turn) > same
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))?;
+    let score = coarse.score(mesh, pose).max(*runner_up_score);
+    let margin = if score > 0.0 {
+        (score - runner_up_score) / score
+    } else {
+        0.0
+    };
+    Some(Uniqueness {
+        score,
+        runner_up_score: *runner_up_score,
+        runner_up: *runner_up,
+        margin,
+        ambiguous: score - runner_up_score <= 2.0 * score.max(0.0).sqrt(),
+    })
 }

@@ -116,6 +116,9 @@ impl Default for RobotFitOptions {
                 // runs about the found pose were a third of a 100 mm fit's rigid stage
                 // (docs/BENCHMARKS.md) and changed no fit of the bench's 40.
                 twin_search: false,
+                // The robot trials were measured without it; the robot's start is not a
+                // part's, and its joints are still wrong here.
+                local_candidate: false,
                 // The robot trials were measured with the cosine schedule (eq. 33).
                 schedule: DeltaSchedule::Cosine,
                 ..PcaOptions::default()
