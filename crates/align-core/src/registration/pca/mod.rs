@@ -91,8 +91,9 @@ pub struct PcaOptions {
     /// fit's rigid stages were measured.
     pub without_large_planes: bool,
     /// With an exploration, the local stage alone (as `starts` 0 runs it, its wide bands and
-    /// polish) also runs from the start, and its end is one more candidate, scored as the
-    /// exploration's ends are (default). The exploration's short runs use coarse keypoints in
+    /// polish) runs from the start in place of the exploration's short run from there, and its
+    /// end is one more candidate, scored as the exploration's ends are (default); a tie goes to
+    /// the exploration's end. The exploration's short runs use coarse keypoints in
     /// a band of delta: on the unseen CAD set A (`replay`) they missed 10 scans at 50-1000 mm
     /// that the local stage from the same start fitted, a flat link among them found upside
     /// down and called unique. Off: the exploration's ends only, as the robot fit's rigid
