@@ -531,3 +531,45 @@ fn a_local_run_from_far_off_starts_in_a_band_of_the_parts_radius() {
         );
     }
 }
+
+/// At a delta too small for the exploration's turns, the full alignment's candidate is the local
+/// stage's end, which has already run the schedule down to the narrowest band on the fine
+/// keypoints and polished: it is taken as it is (pose and iterations), not refined a second
+/// time. Before, the run on the fine
+/// keypoints and the polish ran again from it: a 50 mm alignment of the unseen CAD set A took
+/// about a third longer than the local stage alone needs (docs/BENCHMARKS.md).
+#[test]
+fn a_local_end_that_wins_is_the_alignment_without_a_second_run() {
+    let mesh = step_block();
+    let truth = truth();
+    let cloud = cluttered_scan(&mesh, &truth);
+    for seed in [21, 22] {
+        let start = displaced_start(&mesh, &truth, seed, 0.02);
+        let full = align_cloud(&mesh, &cloud, &start, 0.02, &PcaOptions::default()).unwrap();
+        let local_options = PcaOptions {
+            starts: 0,
+            ..PcaOptions::default()
+        };
+        let local = align_cloud(&mesh, &cloud, &start, 0.02, &local_options).unwrap();
+        let (position, rotation) = errors(
+            &full.alignment.base_from_part,
+            &local.alignment.base_from_part,
+        );
+        assert!(
+            position < 1e-9 && rotation < 1e-9,
+            "seed {seed}: the full alignment moved the local end {position:e} m, {rotation:e} rad"
+        );
+        assert_eq!(
+            full.alignment.iterations, local.alignment.iterations,
+            "seed {seed}: iterations after the local end"
+        );
+        let (position, rotation) = errors(&full.alignment.base_from_part, &truth);
+        assert!(position.hypot(rotation * mesh.radius_m()) < 1e-3);
+        // Unique: every run about the pose ended there (None) or short of it.
+        assert!(
+            !full.uniqueness.as_ref().is_some_and(|u| u.ambiguous),
+            "seed {seed}: {:?}",
+            full.uniqueness
+        );
+    }
+}
