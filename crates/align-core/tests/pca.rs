@@ -535,9 +535,8 @@ fn a_local_run_from_far_off_starts_in_a_band_of_the_parts_radius() {
 /// At a delta too small for the exploration's turns, the full alignment's candidate is the local
 /// stage's end, which has already run the schedule down to the narrowest band on the fine
 /// keypoints and polished: it is taken as it is (pose and iterations), not refined a second
-/// time. Before, the run on the fine
-/// keypoints and the polish ran again from it: a 50 mm alignment of the unseen CAD set A took
-/// about a third longer than the local stage alone needs (docs/BENCHMARKS.md).
+/// time. Before, the run on the fine keypoints and the polish ran again from it: a 50 mm
+/// alignment of the unseen CAD set A took about a third longer (docs/BENCHMARKS.md).
 #[test]
 fn a_local_end_that_wins_is_the_alignment_without_a_second_run() {
     let mesh = step_block();

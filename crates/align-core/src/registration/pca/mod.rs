@@ -563,11 +563,11 @@ fn locate(
                 .map(|(voxel_m, points)| (*voxel_m, points.as_slice())),
         )
         .collect();
-    // The exploration's best end (`start` now) ended its run in the narrowest band.
     let mut polished_already = local_won.is_some();
     let mut run = if let Some(local_run) = local_won {
         local_run
     } else if coarse.is_some() && !options.fine_run {
+        // The exploration's best end (`start` now) ended its run in the narrowest band.
         ScheduleRun {
             pose: start,
             iterations: 0,
