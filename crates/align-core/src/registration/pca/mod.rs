@@ -18,6 +18,7 @@ use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3};
 
+mod consensus;
 mod exploration;
 mod matching;
 mod model_to_scan;
@@ -26,12 +27,13 @@ mod polish;
 mod schedule;
 mod step;
 
+pub use self::consensus::scan_consensus;
+use self::consensus::{Coarse, consensus};
 use self::exploration::{
     EXPLORATION_SLACK, Exploring, detected_starts, explore, explore_turns, is_wide, uniqueness,
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::matching::{Lookup, correspond, near_surface};
-use self::planes::without_large_planes;
 pub use self::planes::without_large_planes as without_planes_larger_than;
 pub use self::planes::{floor_plane, on_a_plane, without_floor_under};
 use self::polish::polish;
@@ -716,80 +718,4 @@ fn within_local_reach(
         .filter(|p| (*p - centre).norm_squared() <= reach_squared)
         .copied()
         .collect()
-}
-
-/// The score the exploration ranks poses by (coarse keypoints of `cloud` within a band of the
-/// part's surface at `pose`, less those inside it), for telling why a pose is wrong against a
-/// known truth: a truth that scores higher is a pose the search never reached; one that scores
-/// lower is a scan the score cannot read (crates/cad-scans).
-pub fn scan_consensus(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    pose: &Isometry3<f64>,
-    options: &PcaOptions,
-) -> f64 {
-    Coarse::new(mesh, cloud, options).score(mesh, pose)
-}
-
-/// The coarse keypoints the exploration runs on and scores its runs with, and the band it
-/// scores in, built once per alignment (a voxel grid of the whole cloud and the plane search;
-/// rebuilt for every stage that scored, they were a fifth to a third of a 50 mm alignment's
-/// time on the CAD scans).
-pub(super) struct Coarse {
-    /// One keypoint per voxel of three times the options' voxel.
-    all: Vec<Point3<f64>>,
-    /// `all` without the planes too large to be the part's (see [`planes`]); `None` when the
-    /// options keep them.
-    without_planes: Option<Vec<Point3<f64>>>,
-    band_m: f64,
-}
-
-impl Coarse {
-    fn new(mesh: &Mesh, cloud: &[Point3<f64>], options: &PcaOptions) -> Self {
-        let voxel_m = options.voxel_m * 3.0;
-        let all = voxel_representatives(cloud, voxel_m);
-        let without_planes = options
-            .without_large_planes
-            .then(|| without_large_planes(all.clone(), mesh, voxel_m));
-        Self {
-            all,
-            without_planes,
-            band_m: (options.voxel_m * 2.0).max(options.delta_min_m * 0.3),
-        }
-    }
-
-    /// The keypoints every score counts (and the runs from a far start follow).
-    fn scored(&self) -> &[Point3<f64>] {
-        self.without_planes.as_deref().unwrap_or(&self.all)
-    }
-
-    /// The score of `pose` (see [`consensus`]).
-    fn score(&self, mesh: &Mesh, pose: &Isometry3<f64>) -> f64 {
-        consensus(mesh, self.scored(), pose, self.band_m)
-    }
-}
-
-/// How well a pose explains the scan: keypoints on the surface (within `band`) count for it,
-/// keypoints deep inside the part count against it twice, since a scanner cannot see into a
-/// solid. Clutter neither helps nor hurts a pose it does not touch.
-fn consensus(mesh: &Mesh, keypoints: &[Point3<f64>], pose: &Isometry3<f64>, band: f64) -> f64 {
-    let part_from_base = pose.inverse();
-    let (lower, upper) = mesh.bounds();
-    keypoints
-        .iter()
-        .map(|p| part_from_base * p)
-        .filter(|p| {
-            (0..3).all(|axis| p[axis] >= lower[axis] - band && p[axis] <= upper[axis] + band)
-        })
-        .map(|p| {
-            let closest = mesh.closest_point(&p);
-            if closest.signed_distance.abs() <= band {
-                1.0
-            } else if closest.signed_distance < -band && mesh.is_watertight() {
-                -2.0
-            } else {
-                0.0
-            }
-        })
-        .sum()
 }
