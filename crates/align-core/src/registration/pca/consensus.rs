@@ -53,6 +53,18 @@ impl Coarse {
         self.without_planes.as_deref().unwrap_or(&self.all)
     }
 
+    /// Whether `pose` explains less of the scan than `than` by more than the scores' sampling
+    /// noise (see [`score_noise`]).
+    pub(super) fn explains_less(
+        &self,
+        mesh: &Mesh,
+        pose: &Isometry3<f64>,
+        than: &Isometry3<f64>,
+    ) -> bool {
+        let than_score = self.score(mesh, than);
+        self.score(mesh, pose) < than_score - score_noise(than_score)
+    }
+
     /// The score of `pose` (see [`consensus`]).
     pub(super) fn score(&self, mesh: &Mesh, pose: &Isometry3<f64>) -> f64 {
         consensus(mesh, self.scored(), pose, self.band_m)
@@ -87,4 +99,51 @@ pub(super) fn consensus(
             }
         })
         .sum()
+}
+
+/// How far apart two scores may lie by the sampling alone: a score counts keypoints, and a
+/// count of n varies by about sqrt(n), so two poses within twice that explain the scan alike.
+pub(super) fn score_noise(score: f64) -> f64 {
+    2.0 * score.max(0.0).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+    use nalgebra::{Isometry3, Vector3};
+
+    use super::Coarse;
+    use crate::geometry::shapes::extrude;
+    use crate::registration::pca::PcaOptions;
+    use crate::trials::clouds::{ScanOptions, scan_part};
+
+    #[test]
+    fn a_pose_carried_off_the_part_explains_less_and_one_a_hair_off_as_much() {
+        let outline = [
+            [0.0, 0.0],
+            [0.2, 0.0],
+            [0.2, 0.06],
+            [0.14, 0.06],
+            [0.14, 0.1],
+            [0.0, 0.1],
+        ];
+        let mesh = extrude(&outline, 0.15).unwrap();
+        let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
+        let scan = ScanOptions {
+            floor: true,
+            neighbour: true,
+            ..ScanOptions::default()
+        };
+        let cloud = scan_part(&mesh, &truth, &scan);
+        let coarse = Coarse::new(&mesh, &cloud, &PcaOptions::default());
+        // Slid 300 mm along the floor, as the fine run carried the TIAGo Pro link.
+        let carried_off = Isometry3::translation(0.3, 0.0, 0.0) * truth;
+        let hair_off = Isometry3::translation(0.0002, 0.0, 0.0) * truth;
+        assert!(coarse.score(&mesh, &truth) > 50.0);
+        assert!(coarse.explains_less(&mesh, &carried_off, &truth));
+        assert!(!coarse.explains_less(&mesh, &truth, &carried_off));
+        assert!(!coarse.explains_less(&mesh, &hair_off, &truth));
+        assert!(!coarse.explains_less(&mesh, &truth, &hair_off));
+    }
 }

@@ -5,6 +5,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rayon::prelude::*;
 
+use super::consensus::score_noise;
 use super::{
     Coarse, PcaOptions, SAME_POSE_FRACTION_OF_RADIUS, Uniqueness, consensus, run_schedule,
 };
@@ -386,6 +387,6 @@ pub(super) fn uniqueness(
         runner_up_score: *runner_up_score,
         runner_up: *runner_up,
         margin,
-        ambiguous: score - runner_up_score <= 2.0 * score.max(0.0).sqrt(),
+        ambiguous: score - runner_up_score <= score_noise(score),
     })
 }
