@@ -28,8 +28,8 @@ pub fn scan_consensus(
 pub(super) struct Coarse {
     /// One keypoint per voxel of three times the options' voxel.
     pub(super) all: Vec<Point3<f64>>,
-    /// `all` without the planes too large to be the part's (see [`planes`]); `None` when the
-    /// options keep them.
+    /// `all` without the planes too large to be the part's (see [`super::planes`]); `None`
+    /// when the options keep them.
     without_planes: Option<Vec<Point3<f64>>>,
     band_m: f64,
 }
