@@ -114,21 +114,13 @@ mod tests {
     use nalgebra::{Isometry3, Vector3};
 
     use super::Coarse;
-    use crate::geometry::shapes::extrude;
     use crate::registration::pca::PcaOptions;
     use crate::trials::clouds::{ScanOptions, scan_part};
+    use crate::trials::parts::step_block;
 
     #[test]
     fn a_pose_carried_off_the_part_explains_less_and_one_a_hair_off_as_much() {
-        let outline = [
-            [0.0, 0.0],
-            [0.2, 0.0],
-            [0.2, 0.06],
-            [0.14, 0.06],
-            [0.14, 0.1],
-            [0.0, 0.1],
-        ];
-        let mesh = extrude(&outline, 0.15).unwrap();
+        let mesh = step_block().unwrap().mesh;
         let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
         let scan = ScanOptions {
             floor: true,
