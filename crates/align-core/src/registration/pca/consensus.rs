@@ -1,10 +1,10 @@
 //! How much of a scan a pose of the part explains: the score the exploration ranks its ends by,
 //! the uniqueness test compares poses with, and the checks of a run against its start use.
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::PcaOptions;
-use super::planes::without_large_planes;
+use super::planes::{large_planes, on_a_plane};
 use crate::geometry::Mesh;
 use crate::registration::sampling::voxel_representatives;
 
@@ -31,6 +31,9 @@ pub(super) struct Coarse {
     /// `all` without the planes too large to be the part's (see [`super::planes`]); `None`
     /// when the options keep them.
     without_planes: Option<Vec<Point3<f64>>>,
+    /// The planes left out of `without_planes` (a point on each and its unit normal; empty when
+    /// the options keep them).
+    planes: Vec<(Point3<f64>, Vector3<f64>)>,
     band_m: f64,
 }
 
@@ -38,12 +41,18 @@ impl Coarse {
     pub(super) fn new(mesh: &Mesh, cloud: &[Point3<f64>], options: &PcaOptions) -> Self {
         let voxel_m = options.voxel_m * 3.0;
         let all = voxel_representatives(cloud, voxel_m);
+        let planes = if options.without_large_planes {
+            large_planes(&all, mesh, voxel_m)
+        } else {
+            Vec::new()
+        };
         let without_planes = options
             .without_large_planes
-            .then(|| without_large_planes(all.clone(), mesh, voxel_m));
+            .then(|| off_the_planes(&all, &planes));
         Self {
             all,
             without_planes,
+            planes,
             band_m: (options.voxel_m * 2.0).max(options.delta_min_m * 0.3),
         }
     }
@@ -63,6 +72,11 @@ impl Coarse {
     ) -> bool {
         let than_score = self.score(mesh, than);
         self.score(mesh, pose) < than_score - score_noise(than_score)
+    }
+
+    /// `points` without those on the planes the scores leave out.
+    pub(super) fn off_the_planes(&self, points: &[Point3<f64>]) -> Vec<Point3<f64>> {
+        off_the_planes(points, &self.planes)
     }
 
     /// The score of `pose` (see [`consensus`]).
@@ -99,6 +113,17 @@ pub(super) fn consensus(
             }
         })
         .sum()
+}
+
+fn off_the_planes(
+    points: &[Point3<f64>],
+    planes: &[(Point3<f64>, Vector3<f64>)],
+) -> Vec<Point3<f64>> {
+    points
+        .iter()
+        .filter(|p| !on_a_plane(p, planes))
+        .copied()
+        .collect()
 }
 
 /// How far apart two scores may lie by the sampling alone: a score counts keypoints, and a

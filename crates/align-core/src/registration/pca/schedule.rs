@@ -206,6 +206,7 @@ impl Band {
     }
 }
 
+#[derive(Debug, Clone, Copy)]
 pub(super) struct ScheduleRun {
     pub(super) pose: Isometry3<f64>,
     pub(super) iterations: usize,
