@@ -358,6 +358,15 @@ pub fn pose_candidates(
     distinct_poses(scored, count, mesh.radius_m(), distinct_m)
 }
 
+/// Whether two poses of the part are one for the uniqueness test: apart by at most
+/// [`SAME_POSE_FRACTION_OF_RADIUS`] of its radius at its centroid and at its radius.
+pub(super) fn same_pose(mesh: &Mesh, a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+    let centre = mesh.centroid();
+    let shift_m = (a * centre - b * centre).norm();
+    let turn_m = a.rotation.angle_to(&b.rotation) * mesh.radius_m();
+    shift_m.max(turn_m) <= SAME_POSE_FRACTION_OF_RADIUS * mesh.radius_m()
+}
+
 /// The pose against the best exploration end that is a different pose, scored alike.
 pub(super) fn uniqueness(
     mesh: &Mesh,
@@ -365,16 +374,9 @@ pub(super) fn uniqueness(
     pose: &Isometry3<f64>,
     ends: &[(f64, Isometry3<f64>)],
 ) -> Option<Uniqueness> {
-    let same = SAME_POSE_FRACTION_OF_RADIUS * mesh.radius_m();
-    let centre = mesh.centroid();
     let (runner_up_score, runner_up) = ends
         .iter()
-        .filter(|(_, end)| {
-            // Apart by more than `same` at the centre or at the part's radius.
-            let shift = (end * centre - pose * centre).norm();
-            let turn = end.rotation.angle_to(&pose.rotation) * mesh.radius_m();
-            shift.max(turn) > same
-        })
+        .filter(|(_, end)| !same_pose(mesh, end, pose))
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
     let score = coarse.score(mesh, pose).max(*runner_up_score);
     let margin = if score > 0.0 {

@@ -13,10 +13,11 @@
 
 use nalgebra::{Isometry3, Point3};
 
+use super::PcaOptions;
 use super::consensus::{Coarse, consensus, score_noise};
+use super::exploration::same_pose;
 use super::polish::polish;
 use super::schedule::{RunSlack, ScheduleRun, run_schedule_on_levels};
-use super::{PcaOptions, SAME_POSE_FRACTION_OF_RADIUS};
 use crate::geometry::Mesh;
 
 /// At most this many of the exploration's ends besides the found pose are run down and counted
@@ -50,13 +51,7 @@ pub(super) fn decide_finely(
         score: found_score,
         ends,
     } = undecided;
-    let same_m = SAME_POSE_FRACTION_OF_RADIUS * mesh.radius_m();
-    let centre = mesh.centroid();
-    let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
-        let shift_m = (a * centre - b * centre).norm();
-        let turn_m = a.rotation.angle_to(&b.rotation) * mesh.radius_m();
-        shift_m.max(turn_m) <= same_m
-    };
+    let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| same_pose(mesh, a, b);
     let bar = found_score - score_noise(found_score);
     let mut ranked = ends.to_vec();
     ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
