@@ -35,7 +35,7 @@ pub(super) struct Undecided<'a> {
 
 /// The found pose against the exploration's ends that score within the coarse noise of it (at
 /// most [`CONTENDERS`], one per pose), each run down from `band0_m` on the fine `keypoints` and
-/// polished, all counted on the fine keypoints off the large planes in the narrowest of their
+/// polished (when the options polish, as the found pose was), all counted on the fine keypoints off the large planes in the narrowest of their
 /// polishes' bands: the contender's run when it explains more than the found pose by more than
 /// the count's noise; `None` when the found pose stays.
 pub(super) fn decide_finely(
@@ -74,7 +74,11 @@ pub(super) fn decide_finely(
             RunSlack::EXACT,
             &[],
         );
-        match polish(mesh, keypoints, &run.pose, run.delta, options) {
+        let polished = options
+            .polish
+            .then(|| polish(mesh, keypoints, &run.pose, run.delta, options))
+            .flatten();
+        match polished {
             Some(polished) => ScheduleRun {
                 pose: polished.pose,
                 iterations: run.iterations + polished.iterations,
