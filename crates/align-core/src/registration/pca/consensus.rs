@@ -4,7 +4,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::PcaOptions;
-use super::planes::{large_planes, on_a_plane};
+use super::planes::{large_planes, off_the_planes};
 use crate::geometry::Mesh;
 use crate::registration::sampling::voxel_representatives;
 
@@ -113,17 +113,6 @@ pub(super) fn consensus(
             }
         })
         .sum()
-}
-
-fn off_the_planes(
-    points: &[Point3<f64>],
-    planes: &[(Point3<f64>, Vector3<f64>)],
-) -> Vec<Point3<f64>> {
-    points
-        .iter()
-        .filter(|p| !on_a_plane(p, planes))
-        .copied()
-        .collect()
 }
 
 /// How far apart two scores may lie by the sampling alone: a score counts keypoints, and a

@@ -236,6 +236,18 @@ fn most_supported_plane(
     best.map(|(_, origin, normal)| (origin, normal))
 }
 
+/// `points` without those on one of `planes`.
+pub(super) fn off_the_planes(
+    points: &[Point3<f64>],
+    planes: &[(Point3<f64>, Vector3<f64>)],
+) -> Vec<Point3<f64>> {
+    points
+        .iter()
+        .filter(|p| !on_a_plane(p, planes))
+        .copied()
+        .collect()
+}
+
 /// Whether `point` lies on one of `planes`.
 pub fn on_a_plane(point: &Point3<f64>, planes: &[(Point3<f64>, Vector3<f64>)]) -> bool {
     planes

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use super::PcaOptions;
 use super::matching::{Lookup, Match, NO_HINT, correspond};
 use super::model_to_scan::{ModelSamples, ModelToScanLevel, ScanTree, correspond_model_to_scan};
-use super::planes::{large_planes, on_a_plane};
+use super::planes::{large_planes, off_the_planes};
 use super::step::{WEAK_DIRECTION_FRACTION, step_along};
 use crate::geometry::Mesh;
 use crate::registration::convergence::{StopCriterion, pose_distance};
@@ -375,14 +375,7 @@ pub(super) fn coarser_without_large_planes(
     let planes = large_planes(coarsest, mesh, *coarsest_voxel_m);
     coarser
         .iter()
-        .map(|(voxel_m, points)| {
-            let kept = points
-                .iter()
-                .filter(|p| !on_a_plane(p, &planes))
-                .copied()
-                .collect();
-            (*voxel_m, kept)
-        })
+        .map(|(voxel_m, points)| (*voxel_m, off_the_planes(points, &planes)))
         .collect()
 }
 
