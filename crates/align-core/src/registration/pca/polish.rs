@@ -30,11 +30,15 @@ const STILL_STEPS: usize = 2;
 /// Fewer matches than this measure no spread.
 const MIN_MATCHES: usize = 12;
 
+#[derive(Debug, Clone, Copy)]
 pub(super) struct Polished {
     pub pose: Isometry3<f64>,
     pub iterations: usize,
     pub converged: bool,
     pub band_m: f64,
+    /// The last step's matches more than a robust standard deviation off their surface, on each
+    /// side of it (see `hop`).
+    pub off_the_surface: Sides,
 }
 
 /// Steps from `pose` in a band of [`BAND_PER_SIGMA`] robust standard deviations of the
@@ -46,6 +50,18 @@ pub(super) fn polish(
     pose: &Isometry3<f64>,
     band_m: f64,
     options: &PcaOptions,
+) -> Option<Polished> {
+    polish_in_steps(mesh, keypoints, pose, band_m, options, MAX_ITERATIONS)
+}
+
+/// [`polish`] in at most `max_steps` steps.
+pub(super) fn polish_in_steps(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    band_m: f64,
+    options: &PcaOptions,
+    max_steps: usize,
 ) -> Option<Polished> {
     let (lower, upper) = mesh.bounds();
     // The polish moves the part by millimetres: the keypoints within the schedule's band of the
@@ -76,7 +92,8 @@ pub(super) fn polish(
     let mut still = 0;
     let mut iterations = 0;
     let mut hints = vec![NO_HINT; near.len()];
-    while iterations < MAX_ITERATIONS {
+    let mut off_the_surface = Sides::default();
+    while iterations < max_steps {
         let mut matches = correspond(
             mesh,
             &near,
@@ -99,6 +116,7 @@ pub(super) fn polish(
         for m in &mut matches {
             m.weight = (m.distance / band * std::f64::consts::FRAC_PI_2).cos();
         }
+        off_the_surface = Sides::of(&matches, band / BAND_PER_SIGMA);
         iterations += 1;
         let Some(step) = step_for(&matches, options.step, radius_m) else {
             break;
@@ -129,7 +147,39 @@ pub(super) fn polish(
         iterations,
         converged: still >= STILL_STEPS,
         band_m: band,
+        off_the_surface,
     })
+}
+
+/// Matches counted by the side of their surface they lie on (by its normal).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(super) struct Sides {
+    /// Behind the surface: inside the part's material.
+    pub behind: usize,
+    pub in_front: usize,
+}
+
+impl Sides {
+    /// `matches` more than `sigma_m` off their surface, by side.
+    fn of(matches: &[Match], sigma_m: f64) -> Self {
+        let mut sides = Self::default();
+        for m in matches {
+            let signed_m = m.normal.dot(&(m.point - m.surface));
+            if signed_m < -sigma_m {
+                sides.behind += 1;
+            } else if signed_m > sigma_m {
+                sides.in_front += 1;
+            }
+        }
+        sides
+    }
+
+    /// Clearly more behind than in front: by more than twice the square root of their total,
+    /// the spread of a count's difference when each side were as likely (the scanner's noise).
+    pub(super) fn mostly_behind(&self) -> bool {
+        let (behind, in_front) = (self.behind as f64, self.in_front as f64);
+        behind - in_front > 2.0 * (behind + in_front).sqrt()
+    }
 }
 
 /// [`BAND_PER_SIGMA`] times the robust standard deviation (1.4826 times the median) of the
