@@ -115,6 +115,30 @@ pub(super) fn consensus(
         .sum()
 }
 
+/// Of `ends` (pose, the band its polish ended in), the one that explains clearly more of
+/// `counted` than `found` does (by more than [`score_noise`]), all counted in the narrowest of
+/// the bands, `found`'s among them: the pose that fits best measures the scanner's noise best,
+/// and in a wider band a worse fit's points would count as well. The last of equal bests.
+pub(super) fn clearly_ahead(
+    mesh: &Mesh,
+    counted: &[Point3<f64>],
+    found: (&Isometry3<f64>, f64),
+    ends: &[(Isometry3<f64>, f64)],
+) -> Option<usize> {
+    let (found_pose, found_band_m) = found;
+    let band_m = ends
+        .iter()
+        .map(|(_, band_m)| *band_m)
+        .fold(found_band_m, f64::min);
+    let found_score = consensus(mesh, counted, found_pose, band_m);
+    let (best, best_score) = ends
+        .iter()
+        .map(|(pose, _)| consensus(mesh, counted, pose, band_m))
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (best_score - found_score > score_noise(best_score)).then_some(best)
+}
+
 /// How far apart two scores may lie by the sampling alone: a score counts keypoints, and a
 /// count of n varies by about sqrt(n), so two poses within twice that explain the scan alike.
 pub(super) fn score_noise(score: f64) -> f64 {

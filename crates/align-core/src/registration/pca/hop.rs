@@ -19,7 +19,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::PcaOptions;
-use super::consensus::{consensus, score_noise};
+use super::consensus::clearly_ahead;
 use super::polish::{Polished, polish, polish_in_steps};
 use super::schedule::ScheduleRun;
 use crate::geometry::Mesh;
@@ -59,23 +59,16 @@ pub(super) fn hop(
         } else {
             starts.iter().filter_map(settle).collect()
         };
-        let count_band_m = ends
-            .iter()
-            .map(|end| end.band_m)
-            .fold(current.delta, f64::min);
-        let current_score = consensus(mesh, counted, &current.pose, count_band_m);
-        let Some((best_score, best)) = ends
-            .iter()
-            .map(|end| (consensus(mesh, counted, &end.pose, count_band_m), end))
-            .max_by(|a, b| a.0.total_cmp(&b.0))
+        let counted_ends: Vec<(Isometry3<f64>, f64)> =
+            ends.iter().map(|end| (end.pose, end.band_m)).collect();
+        let Some(best) =
+            clearly_ahead(mesh, counted, (&current.pose, current.delta), &counted_ends)
+                .map(|index| ends[index])
         else {
             break;
         };
-        if best_score - current_score <= score_noise(best_score) {
-            break;
-        }
         // The start's few steps found the better basin; the polish settles in it.
-        let settled = polish(mesh, keypoints, &best.pose, band_m, options).unwrap_or(*best);
+        let settled = polish(mesh, keypoints, &best.pose, band_m, options).unwrap_or(best);
         current = ScheduleRun {
             pose: settled.pose,
             iterations: current.iterations + best.iterations + settled.iterations,

@@ -14,6 +14,7 @@
 //! linearised point-to-plane step, which converges in a few iterations once the part is close,
 //! so the stopping criterion ends the run long before the schedule does.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3};
@@ -720,9 +721,9 @@ fn locate(
         };
         if options.hop_out_of_the_material && settled_inside {
             // Off the large planes when they are known, as the coarse score counts.
-            let counted = match &coarse {
-                Some(coarse) => coarse.off_the_planes(&keypoints),
-                None => keypoints.clone(),
+            let counted: Cow<[Point3<f64>]> = match &coarse {
+                Some(coarse) => Cow::Owned(coarse.off_the_planes(&keypoints)),
+                None => Cow::Borrowed(&keypoints),
             };
             if let Some(better) = hop(mesh, &keypoints, &counted, &run, last_band_m, options) {
                 run = better;

@@ -14,7 +14,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use super::PcaOptions;
-use super::consensus::{Coarse, consensus, score_noise};
+use super::consensus::{Coarse, clearly_ahead, score_noise};
 use super::exploration::same_pose;
 use super::polish::polish;
 use super::schedule::{RunSlack, ScheduleRun, run_schedule_on_levels};
@@ -98,18 +98,13 @@ pub(super) fn decide_finely(
     if runs.len() < 2 {
         return None;
     }
-    // The pose that fits best measures the scanner's noise best: in a wider band a worse fit's
-    // points would count as well.
-    let band_m = runs.iter().map(|r| r.delta).fold(f64::INFINITY, f64::min);
     // Counted off the large planes, as the coarse score is: a flat face laid on a box's side
     // explains its points to the micron.
     let counted = coarse.off_the_planes(keypoints);
-    let scores: Vec<f64> = runs
-        .iter()
-        .map(|r| consensus(mesh, &counted, &r.pose, band_m))
-        .collect();
-    let best = (1..runs.len()).max_by(|&a, &b| scores[a].total_cmp(&scores[b]))?;
-    (scores[best] - scores[0] > score_noise(scores[best])).then_some(runs[best])
+    let contenders: Vec<(Isometry3<f64>, f64)> =
+        runs[1..].iter().map(|r| (r.pose, r.delta)).collect();
+    clearly_ahead(mesh, &counted, (&runs[0].pose, runs[0].delta), &contenders)
+        .map(|best| runs[best + 1])
 }
 
 #[cfg(test)]
