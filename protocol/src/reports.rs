@@ -69,9 +69,10 @@ pub struct WeakDirection {
 /// Pose covariance from the noise and the touch geometry (align_core::registration::uncertainty).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Uncertainty {
-    /// Touch noise the covariance assumes, m.
+    /// Measurement noise the covariance assumes (of a touch, or of a scan point along its normal), m.
     pub sigma_m: f64,
-    /// "declared" (the session's `noise_sigma`) or "estimated" (from the residuals, N - 6 dof).
+    /// "declared" (the session's `noise_sigma`), "estimated" (from the residuals, N - 6 dof) or,
+    /// for a cloud, "scan" (the robust spread of the last matches' residuals).
     pub sigma_source: String,
     /// The noise the residuals suggest, sqrt(RSS / (N - 6)), m; null with 6 touches or fewer. Far
     /// above a declared sigma, the model lacks an effect (`ips diagnose`) and the covariance,
@@ -86,6 +87,10 @@ pub struct Uncertainty {
     pub weak_direction: WeakDirection,
     /// The part point (base frame, m) whose position is known best, if computable.
     pub least_uncertain_point: Option<[f64; 3]>,
+    /// The thesis's pose distance from the truth (translation of the part's origin and rotation
+    /// times the part's radius, as a hypotenuse) that 95 % of fits stay within, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_distance_95_mm: Option<f64>,
 }
 
 /// The keys every alignment report starts with (DESIGN.md 6.4), written at the top level of
@@ -142,6 +147,12 @@ pub struct CloudReport {
     /// local alignment or when no other pose was found.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uniqueness: Option<CloudUniqueness>,
+    /// The pose's covariance from its last matches, the noise measured on them (`sigma_source`
+    /// "scan"); absent with `uncertainty_error` saying why when it cannot be computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<Uncertainty>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty_error: Option<String>,
 }
 
 /// The pose's consensus score (keypoints on the part's surface, less those inside it) against

@@ -7,8 +7,10 @@
 //! cargo bench -p cad-scans --bench replay -- --scenes /tmp/cs40 --runs 3 [--full] [--json]
 //! ```
 //!
-//! Prints, per delta, the successes (pose distance under 1 mm, as cad-scans scores) and the
-//! median over the scenes of each scene's fastest run. The mesh and the cloud are read before
+//! Prints, per delta, the successes (pose distance under 1 mm, as cad-scans scores), the
+//! median over the scenes of each scene's fastest run, how many successes' truths lie in the
+//! pose's reported 95 % region, how many misses are flagged (ambiguous, or loose: reported
+//! uncertain by 1 mm or more at 95 %, or without an uncertainty) and how many successes loose. The mesh and the cloud are read before
 //! the clock starts, as `cad-scans` and the peers time them.
 
 use std::path::{Path, PathBuf};
@@ -18,6 +20,7 @@ use align_core::geometry::Mesh;
 use align_core::io::{read_cloud, read_mesh};
 use align_core::registration::convergence::pose_distance;
 use align_core::registration::pca::{align_cloud, scan_consensus};
+use align_core::registration::uncertainty::{CHI2_95_6DOF, pose_deviation};
 use align_core::trials::SUCCESS_THRESHOLD_M;
 use align_service::jobs::cloud::cloud_options;
 use cad_scans::files::{SceneFile, isometry_from_rows};
@@ -119,8 +122,8 @@ fn main() {
         std::process::exit(2);
     }
     let options = cloud_options(false, None, !args.full);
-    // (delta mm, succeeded, fastest run s) per scene, and each scene's record for --json.
-    let mut results: Vec<(f64, bool, f64)> = Vec::new();
+    // Each scene's outcome, and its record for --json.
+    let mut results: Vec<Outcome> = Vec::new();
     let mut scenes = Vec::new();
     for (index, dir) in dirs.iter().enumerate() {
         let replayed = match load(dir) {
@@ -164,7 +167,25 @@ fn main() {
             _ => None,
         };
         let uniqueness = last.as_ref().and_then(|r| r.uniqueness.as_ref());
-        results.push((replayed.scene.delta_m * 1e3, succeeded, fastest_s));
+        // Where the truth lies in the reported 95 % region (the squared Mahalanobis distance of
+        // the pose's error), and how far the report says such fits end from the truth.
+        let uncertainty = last.as_ref().and_then(|r| r.uncertainty.as_ref().ok());
+        let mahalanobis_squared = uncertainty.zip(last.as_ref()).and_then(|(u, r)| {
+            u.mahalanobis_squared(&pose_deviation(
+                &replayed.truth,
+                &r.alignment.base_from_part,
+            ))
+        });
+        let within_95_mm = uncertainty.map(|u| u.pose_distance_95_m * 1e3);
+        let outcome = Outcome {
+            delta_mm: replayed.scene.delta_m * 1e3,
+            succeeded,
+            fastest_s,
+            truth_in_region: mahalanobis_squared.is_some_and(|m| m <= CHI2_95_6DOF),
+            ambiguous: uniqueness.is_some_and(|u| u.ambiguous),
+            loose: within_95_mm.is_none_or(|mm| mm >= SUCCESS_THRESHOLD_M * 1e3),
+        };
+        results.push(outcome);
         scenes.push(serde_json::json!({
             "id": replayed.scene.id,
             "part": replayed.scene.part,
@@ -176,29 +197,44 @@ fn main() {
             "ambiguous": uniqueness.is_some_and(|u| u.ambiguous),
             "margin": uniqueness.map(|u| u.margin),
             "miss_scores": miss_scores,
+            "mahalanobis_squared": mahalanobis_squared,
+            "within_95_mm": within_95_mm,
+            "weak_direction": uncertainty.map(|u| u.weak_direction.describe()),
+            "uncertainty_error": last.as_ref().and_then(|r| r.uncertainty.as_ref().err()).map(ToString::to_string),
+            "loose": outcome.loose,
         }));
         if index % 10 == 9 || index + 1 == dirs.len() {
             eprint!("\rreplay: {}/{}", index + 1, dirs.len());
         }
     }
     eprintln!();
-    let mut deltas: Vec<f64> = results.iter().map(|r| r.0).collect();
+    let mut deltas: Vec<f64> = results.iter().map(|r| r.delta_mm).collect();
     deltas.sort_by(f64::total_cmp);
     deltas.dedup();
-    let rows: Vec<(f64, usize, usize, f64)> = deltas
+    let rows: Vec<Row> = deltas
         .iter()
-        .map(|&delta| {
-            let at: Vec<_> = results.iter().filter(|r| r.0 == delta).collect();
-            let mut times: Vec<f64> = at.iter().map(|r| r.2).collect();
-            let successes = at.iter().filter(|r| r.1).count();
-            (delta, successes, at.len(), median(&mut times))
+        .map(|&delta_mm| {
+            let at: Vec<&Outcome> = results.iter().filter(|r| r.delta_mm == delta_mm).collect();
+            let mut times: Vec<f64> = at.iter().map(|r| r.fastest_s).collect();
+            let count = |keep: &dyn Fn(&Outcome) -> bool| at.iter().filter(|r| keep(r)).count();
+            Row {
+                delta_mm,
+                succeeded: count(&|r| r.succeeded),
+                scans: at.len(),
+                median_s: median(&mut times),
+                truth_in_region: count(&|r| r.succeeded && r.truth_in_region),
+                misses_flagged: count(&|r| !r.succeeded && (r.ambiguous || r.loose)),
+                successes_loose: count(&|r| r.succeeded && r.loose),
+            }
         })
         .collect();
     if args.json {
         let rows: Vec<_> = rows
             .iter()
-            .map(|(delta, successes, scans, median_s)| {
-                serde_json::json!({"delta_mm": delta, "succeeded": successes, "scans": scans, "median_time_s": median_s})
+            .map(|row| {
+                serde_json::json!({"delta_mm": row.delta_mm, "succeeded": row.succeeded, "scans": row.scans,
+                    "median_time_s": row.median_s, "truth_in_region": row.truth_in_region,
+                    "misses_flagged": row.misses_flagged, "successes_loose": row.successes_loose})
             })
             .collect();
         println!(
@@ -212,9 +248,48 @@ fn main() {
         if args.full { "full" } else { "local" },
         args.runs
     );
-    println!("| delta (mm) | succeeded | median time (s) |");
-    println!("| ---: | ---: | ---: |");
-    for (delta, successes, scans, median_s) in rows {
-        println!("| {delta:.0} | {successes}/{scans} | {median_s:.4} |");
+    println!(
+        "| delta (mm) | succeeded | median time (s) | truth in the 95 % region (of successes) | misses ambiguous or loose | successes loose |"
+    );
+    println!("| ---: | ---: | ---: | ---: | ---: | ---: |");
+    for row in rows {
+        println!(
+            "| {:.0} | {}/{} | {:.4} | {}/{} | {}/{} | {}/{} |",
+            row.delta_mm,
+            row.succeeded,
+            row.scans,
+            row.median_s,
+            row.truth_in_region,
+            row.succeeded,
+            row.misses_flagged,
+            row.scans - row.succeeded,
+            row.successes_loose,
+            row.succeeded
+        );
     }
+}
+
+/// One scene's replay, as the table counts it.
+#[derive(Debug, Clone, Copy)]
+struct Outcome {
+    delta_mm: f64,
+    succeeded: bool,
+    fastest_s: f64,
+    /// The truth lies in the reported 95 % region of the pose.
+    truth_in_region: bool,
+    ambiguous: bool,
+    /// Reported uncertain by 1 mm or more (95 %, pose distance), or without an uncertainty
+    /// (refused, or too few matches to measure one).
+    loose: bool,
+}
+
+/// The scenes at one delta.
+struct Row {
+    delta_mm: f64,
+    succeeded: usize,
+    scans: usize,
+    median_s: f64,
+    truth_in_region: usize,
+    misses_flagged: usize,
+    successes_loose: usize,
 }

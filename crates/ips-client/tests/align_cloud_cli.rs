@@ -19,10 +19,10 @@ fn ips(args: &[&str]) -> Output {
         .unwrap()
 }
 
-#[test]
-fn cluttered_example_scan_aligns_within_a_millimetre_of_the_truth() {
+/// `ips align-cloud` on the example scan (mm) from 50 mm off, with `extra` flags.
+fn align_the_example(extra: &[&str]) -> Output {
     let (cloud, mesh) = (example("scan.xyz"), example("step_block.stl"));
-    let output = ips(&[
+    let mut args = vec![
         "align-cloud",
         "--cloud",
         &cloud,
@@ -36,8 +36,14 @@ fn cluttered_example_scan_aligns_within_a_millimetre_of_the_truth() {
         "0.65,-0.22,0.02,0,0,0.25",
         "--delta",
         "0.1",
-        "--json",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    ips(&args)
+}
+
+#[test]
+fn cluttered_example_scan_aligns_within_a_millimetre_of_the_truth() {
+    let output = align_the_example(&["--json"]);
     assert!(
         output.status.success(),
         "{}",
@@ -65,6 +71,18 @@ fn cluttered_example_scan_aligns_within_a_millimetre_of_the_truth() {
     assert!(translation < 2e-4, "{translation}");
     assert!(yaw_error * 0.2 < 2e-4, "{yaw_error}");
     assert!(result["kept_points"].as_u64().unwrap() > 1000);
+    // The uncertainty: the scan's noise (0.3 mm) measured on the matches and widened by the
+    // calibration (1.4), and a 95 % bound on the pose distance that holds the error found.
+    let uncertainty = &result["uncertainty"];
+    assert_eq!(uncertainty["sigma_source"], "scan", "{uncertainty}");
+    let sigma_mm = uncertainty["sigma_m"].as_f64().unwrap() * 1e3;
+    assert!((0.35..0.55).contains(&sigma_mm), "{sigma_mm}");
+    let within_mm = uncertainty["pose_distance_95_mm"].as_f64().unwrap();
+    assert!(
+        translation * 1e3 < within_mm && within_mm < 1.0,
+        "{within_mm}"
+    );
+    assert!(result.get("uncertainty_error").is_none());
     for key in [
         "pose",
         "iterations",
@@ -75,6 +93,21 @@ fn cluttered_example_scan_aligns_within_a_millimetre_of_the_truth() {
         "residuals",
     ] {
         assert!(result.get(key).is_some(), "missing {key}");
+    }
+}
+
+#[test]
+fn the_text_report_gives_the_noise_the_95_percent_limits_and_the_weakest_direction() {
+    let output = align_the_example(&[]);
+    assert!(output.status.success());
+    let text = String::from_utf8_lossy(&output.stdout);
+    for expected in [
+        "95% confidence (noise sigma ",
+        " mm, scan): position +-",
+        "weakest: ",
+        "of the truth at 95% confidence (the thesis's pose distance)",
+    ] {
+        assert!(text.contains(expected), "no '{expected}' in\n{text}");
     }
 }
 

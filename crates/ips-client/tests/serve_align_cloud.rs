@@ -162,6 +162,9 @@ fn example_scan_aligned_by_the_service_recovers_the_true_pose() {
     assert!(translation_m < 2e-4, "{translation_m}");
     assert!(yaw_rad * 0.2 < 2e-4, "{yaw_rad}");
     assert!(data["kept_points"].as_u64().unwrap() > 1000, "{data}");
+    // With the pose's uncertainty, the noise measured on the scan.
+    assert_eq!(data["uncertainty"]["sigma_source"], "scan", "{data}");
+    assert!(data["uncertainty"]["pose_distance_95_mm"].as_f64().unwrap() < 1.0);
 
     // The offline command with the same inputs: the same document, key for key.
     let offline = json_stdout(&ips(&[
@@ -211,6 +214,7 @@ fn example_scan_aligned_by_the_service_recovers_the_true_pose() {
     let text = String::from_utf8(text.stdout).unwrap();
     assert!(text.starts_with("base_from_part: xyz [m] 0.62"), "{text}");
     assert!(text.contains("cloud points ->"), "{text}");
+    assert!(text.contains("95% confidence (noise sigma"), "{text}");
     fixture.finish();
 }
 

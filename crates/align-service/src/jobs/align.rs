@@ -212,6 +212,7 @@ pub fn uncertainty_json(found: &PoseUncertainty, sigma_source: &str) -> Uncertai
             text: weak.describe(),
         },
         least_uncertain_point: found.least_uncertain_point.map(|p| point_array(&p)),
+        pose_distance_95_mm: Some(found.pose_distance_95_m * 1e3),
     }
 }
 

@@ -15,7 +15,7 @@ use protocol::reports::{CloudReport, CloudUniqueness};
 use protocol::session::PartSection;
 
 use crate::BadInput;
-use crate::jobs::align::{report_pose, summary};
+use crate::jobs::align::{report_pose, summary, uncertainty_json};
 use crate::jobs::units::{extent_m, refuse_unit_mismatch, unit_hints, with_hints};
 
 /// The start pose's error bound a service request gets when it names none, m. A hand-placed
@@ -157,6 +157,12 @@ pub fn align(job: &CloudAlignment) -> Result<CloudReport, BadInput> {
             margin: u.margin,
             runner_up: report_pose(&u.runner_up),
         }),
+        uncertainty: result
+            .uncertainty
+            .as_ref()
+            .ok()
+            .map(|found| uncertainty_json(found, "scan")),
+        uncertainty_error: result.uncertainty.as_ref().err().map(ToString::to_string),
     })
 }
 

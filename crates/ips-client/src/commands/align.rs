@@ -8,7 +8,7 @@ use align_service::jobs::align::{AlignChoices, align_session, report};
 use align_service::session::LoadedSession;
 use clap::Args;
 use protocol::ServiceCommand;
-use protocol::reports::AlignReport;
+use protocol::reports::{AlignReport, Uncertainty};
 
 use crate::{BadInput, CliError, client, json_line};
 
@@ -68,6 +68,32 @@ pub fn run(args: &AlignArgs) -> Result<String, CliError> {
     }
 }
 
+/// The pose's 95 % confidence limits, its weakest direction and how far such fits end from the
+/// truth, for people.
+pub fn confidence_text(found: &Uncertainty) -> String {
+    let position = &found.position_95_mm;
+    let rotation = &found.rotation_95_mrad;
+    let mut text = format!(
+        "95% confidence (noise sigma {:.4} mm, {}): position +-{:.3} / {:.3} / {:.3} mm (x/y/z), \
+         rotation +-{:.3} / {:.3} / {:.3} mrad (rx/ry/rz)\n  {}\n",
+        found.sigma_m * 1e3,
+        found.sigma_source,
+        position.x,
+        position.y,
+        position.z,
+        rotation.rx,
+        rotation.ry,
+        rotation.rz,
+        found.weak_direction.text
+    );
+    if let Some(mm) = found.pose_distance_95_mm {
+        text += &format!(
+            "  the pose is within {mm:.3} mm of the truth at 95% confidence (the thesis's pose distance)\n"
+        );
+    }
+    text
+}
+
 /// The report for people: the pose, how the search went, its uncertainty and the residuals.
 pub fn to_text(report: &AlignReport) -> String {
     let mut text = crate::pose_line("base_from_part", &report.alignment.pose);
@@ -85,21 +111,7 @@ pub fn to_text(report: &AlignReport) -> String {
         report.alignment.max * 1e3
     );
     if let Some(found) = &report.uncertainty {
-        let position = &found.position_95_mm;
-        let rotation = &found.rotation_95_mrad;
-        text += &format!(
-            "95% confidence (noise sigma {:.4} mm, {}): position +-{:.3} / {:.3} / {:.3} mm (x/y/z), \
-             rotation +-{:.3} / {:.3} / {:.3} mrad (rx/ry/rz)\n  {}\n",
-            found.sigma_m * 1e3,
-            found.sigma_source,
-            position.x,
-            position.y,
-            position.z,
-            rotation.rx,
-            rotation.ry,
-            rotation.rz,
-            found.weak_direction.text
-        );
+        text += &confidence_text(found);
         if let Some(residual) = found.residual_sigma_m
             && found.sigma_source == "declared"
             && residual > 2.0 * found.sigma_m

@@ -13,6 +13,7 @@ use clap::Args;
 use protocol::reports::CloudReport;
 use protocol::{AlignCloudRequest, Pose, ServiceCommand};
 
+use crate::commands::align::confidence_text;
 use crate::{BadInput, CliError, client, json_line};
 
 #[derive(Debug, Args)]
@@ -141,6 +142,10 @@ fn parse_pose(text: &str) -> Result<Pose, BadInput> {
     Ok(Pose::new([x, y, z], [roll, pitch, yaw]))
 }
 
+/// A pose whose 95 % bound on the pose distance reaches this far is called loose: the bar the
+/// thesis's trials count a success under.
+const LOOSE_MM: f64 = 1.0;
+
 pub fn to_text(report: &CloudReport) -> String {
     let mut text = crate::pose_line("base_from_part", &report.alignment.pose);
     text += &format!(
@@ -185,6 +190,17 @@ pub fn to_text(report: &CloudReport) -> String {
         );
     } else {
         text += "uniqueness: not tested, a single run (a local alignment, or a delta too small to turn this part and below the global search's)\n";
+    }
+    if let Some(found) = &report.uncertainty {
+        text += &confidence_text(found);
+        if let Some(mm) = found.pose_distance_95_mm.filter(|&mm| mm >= LOOSE_MM) {
+            text += &format!(
+                "LOOSE: the pose may be {mm:.2} mm from the truth (95%, pose distance), over {LOOSE_MM} mm: \
+                 scan more of the part where it would stop the weakest motion above\n"
+            );
+        }
+    } else if let Some(why) = &report.uncertainty_error {
+        text += &format!("pose uncertainty not available: {why}\n");
     }
     for note in &report.notes {
         text += &format!("note: {note}\n");
@@ -266,9 +282,40 @@ mod tests {
         );
     }
 
-    #[test]
-    fn a_report_without_a_runner_up_says_why_instead_of_nothing() {
-        let report = |starts: usize| protocol::reports::CloudReport {
+    /// A report of `starts` runs with the uncertainty of a box's faces seen with noise
+    /// `sigma_m` (none: not available).
+    fn report(starts: usize, sigma_m: Option<f64>) -> protocol::reports::CloudReport {
+        use align_core::registration::uncertainty::{
+            SurfaceObservation, uncertainty_of_observations,
+        };
+        use nalgebra::{Isometry3, Point3, Vector3};
+        let mut observations = Vec::new();
+        for axis in 0..3 {
+            for sign in [-1.0, 1.0] {
+                for (u, v) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+                    let mut surface = Point3::origin();
+                    surface[axis] = 0.05 * sign;
+                    surface[(axis + 1) % 3] = 0.04 * u;
+                    surface[(axis + 2) % 3] = 0.04 * v;
+                    observations.push(SurfaceObservation {
+                        surface,
+                        direction: Vector3::ith(axis, sign),
+                    });
+                }
+            }
+        }
+        let found = sigma_m.map(|sigma_m| {
+            let pose = Isometry3::identity();
+            let found =
+                uncertainty_of_observations(&observations, &pose, 0.09, &Point3::origin(), sigma_m)
+                    .unwrap();
+            align_service::jobs::align::uncertainty_json(&found, "scan")
+        });
+        protocol::reports::CloudReport {
+            uncertainty_error: found
+                .is_none()
+                .then(|| "6 residuals cannot estimate a sigma".to_owned()),
+            uncertainty: found,
             alignment: protocol::reports::AlignmentSummary {
                 pose: protocol::Pose::new([0.1, 0.2, 0.3], [0.0, 0.0, 0.5]),
                 iterations: 12,
@@ -286,16 +333,37 @@ mod tests {
             notes: Vec::new(),
             ambiguous: false,
             uniqueness: None,
-        };
-        let single = super::to_text(&report(1));
+        }
+    }
+
+    #[test]
+    fn a_report_without_a_runner_up_says_why_instead_of_nothing() {
+        let single = super::to_text(&report(1, None));
         assert!(
             single.contains("uniqueness: not tested, a single run"),
             "{single}"
         );
-        let many = super::to_text(&report(49));
+        let many = super::to_text(&report(49, None));
         assert!(
             many.contains("no other pose to compare, all 49 runs"),
             "{many}"
+        );
+    }
+
+    #[test]
+    fn a_pose_uncertain_beyond_a_millimetre_is_called_loose_and_a_missing_one_says_why() {
+        let tight = super::to_text(&report(1, Some(1e-4)));
+        assert!(
+            tight.contains("95% confidence (noise sigma 0.1000 mm, scan)"),
+            "{tight}"
+        );
+        assert!(!tight.contains("LOOSE"), "{tight}");
+        let loose = super::to_text(&report(1, Some(5e-3)));
+        assert!(loose.contains("LOOSE: the pose may be "), "{loose}");
+        let missing = super::to_text(&report(1, None));
+        assert!(
+            missing.contains("pose uncertainty not available: 6 residuals"),
+            "{missing}"
         );
     }
 

@@ -22,6 +22,7 @@ use nalgebra::{Isometry3, Point3};
 mod consensus;
 mod exploration;
 mod hop;
+mod local_reach;
 mod matching;
 mod model_to_scan;
 mod planes;
@@ -29,6 +30,7 @@ mod polish;
 mod schedule;
 mod step;
 mod tie_break;
+mod uncertainty;
 
 pub use self::consensus::scan_consensus;
 use self::consensus::{Coarse, consensus, score_noise};
@@ -37,6 +39,7 @@ use self::exploration::{
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::hop::hop;
+use self::local_reach::{local_first_band, within_local_reach};
 use self::matching::{Lookup, correspond, near_surface};
 pub use self::planes::without_large_planes as without_planes_larger_than;
 pub use self::planes::{floor_plane, on_a_plane, without_floor_under};
@@ -47,9 +50,11 @@ use self::schedule::{
     run_schedule, run_schedule_on_levels, wide_band_samples,
 };
 use self::tie_break::{Undecided, decide_finely};
+use self::uncertainty::cloud_uncertainty;
 use super::sampling::{voxel_centroids, voxel_representatives};
 use crate::geometry::{Mesh, PrincipalSpread};
 use crate::registration::Alignment;
+use crate::registration::uncertainty::{PoseUncertainty, UncertaintyError};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PcaStep {
@@ -305,6 +310,8 @@ pub struct PcaResult {
     /// How clearly the pose beats the best different pose the exploration found; `None` without
     /// an exploration (a local run) or when every run ended at this pose.
     pub uniqueness: Option<Uniqueness>,
+    /// The pose's covariance from its last matches (see `uncertainty`), or why there is none.
+    pub uncertainty: Result<PoseUncertainty, UncertaintyError>,
 }
 
 /// The pose's score (the consensus: coarse keypoints within a band of the part's surface, less
@@ -381,6 +388,7 @@ pub fn align_cloud(
         kept: final_matches.len(),
         final_delta_m: run.delta,
         uniqueness,
+        uncertainty: cloud_uncertainty(mesh, &final_matches, &run.pose),
     })
 }
 
@@ -759,39 +767,4 @@ fn locate(
         starts,
         uniqueness: uniqueness_found,
     })
-}
-
-/// The first band of a local run (no exploration): delta0, but at most the part's radius (and
-/// at least the last band). The peers' coarse-to-fine stages start at 0.3 m whatever the bound
-/// (crates/cad-scans/peers); measured on the CAD scans (`replay` bench, two corpora of 200,
-/// docs/cad-scan-trials.md): 72 -> 75 and 75 -> 80 successes, the 500 and 1000 mm medians
-/// halved or better; a cap of 0.75 or 1.5 radii gave 73 and 72 on the first corpus.
-fn local_first_band(mesh: &Mesh, delta0_m: f64, options: &PcaOptions) -> f64 {
-    delta0_m.min(mesh.radius_m().max(options.delta_min_m))
-}
-
-/// The points of `cloud` a local run from `start` can match: a run matches only keypoints within
-/// its band of the part's box, and the box's centre moves by about delta0 on the way to the truth
-/// (the user's bound). Points farther from the box's centre at the start than the schedule's
-/// filter reaches from a centre moved by twice delta0 (1.25 (h + sqrt(3) delta0) + 2 delta0, h
-/// the box's half diagonal) are left out before the voxel grid is built: binning the whole cell
-/// was a fifth of a 50 mm local alignment on the CAD scans. A run whose part has wandered
-/// farther than twice its bound has failed whatever it still sees.
-fn within_local_reach(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    start: &Isometry3<f64>,
-    delta0_m: f64,
-) -> Vec<Point3<f64>> {
-    let (lower, upper) = mesh.bounds();
-    let centre = start * Point3::from((lower.coords + upper.coords) / 2.0);
-    let half_diagonal_m = ((upper - lower) / 2.0).norm();
-    // The schedule's filter: half diagonal grown by delta0, and a quarter of it as margin.
-    let reach_m = 1.25 * (half_diagonal_m + 3f64.sqrt() * delta0_m) + 2.0 * delta0_m;
-    let reach_squared = reach_m * reach_m;
-    cloud
-        .iter()
-        .filter(|p| (*p - centre).norm_squared() <= reach_squared)
-        .copied()
-        .collect()
 }

@@ -15,7 +15,7 @@ use crate::registration::convergence::pose_distance;
 
 /// Residuals this many robust standard deviations off still count (Tukey's biweight constant:
 /// 95 % efficiency for Gaussian noise).
-const BAND_PER_SIGMA: f64 = 4.685;
+pub(super) const BAND_PER_SIGMA: f64 = 4.685;
 
 /// The band stays between these fractions of the schedule's last band: the lower keeps a
 /// noise-free scan from a band of nothing, the upper keeps clutter that fills the residuals out.
