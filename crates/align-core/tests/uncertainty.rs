@@ -132,10 +132,29 @@ fn predicted_covariance_matches_a_monte_carlo_of_alignments() {
         .filter(|d| predicted.mahalanobis_squared(d).unwrap() <= CHI2_95_6DOF)
         .count();
     let coverage = inside as f64 / trials as f64;
-    report += &format!("inside the 95% ellipsoid: {inside} of {trials}");
+    report += &format!("inside the 95% ellipsoid: {inside} of {trials}\n");
+    // The pose distance (translation and angle times the radius, as a hypotenuse) the report
+    // says 95 % of fits stay within.
+    let radius_m = predicted.radius_m;
+    let distance = |d: &Vector6<f64>| {
+        (Vector3::new(d[0], d[1], d[2]).norm() * radius_m)
+            .hypot(Vector3::new(d[3], d[4], d[5]).norm())
+    };
+    let within = deviations
+        .iter()
+        .filter(|d| distance(d) <= predicted.pose_distance_95_m)
+        .count();
+    report += &format!(
+        "within the 95% pose distance ({:.4} mm): {within} of {trials}",
+        predicted.pose_distance_95_m * 1e3
+    );
     println!("{report}");
     assert!(worst < 0.25, "{report}");
     assert!((0.90..=1.0).contains(&coverage), "{report}");
+    assert!(
+        (0.90..=0.99).contains(&(within as f64 / trials as f64)),
+        "{report}"
+    );
     // The mean deviation is consistent with zero (no bias beyond 4 standard errors).
     for i in 0..6 {
         let standard_error = (predicted.covariance[(i, i)] / trials as f64).sqrt();
