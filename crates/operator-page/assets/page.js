@@ -147,6 +147,13 @@ function describeResult(result) {
         (report.converged ? '' : ' (not converged)'),
       'part pose (base frame): xyz ' + vec(p.xyz.map((x) => x * 1000), 2) + ' mm, rpy (' + p.rpy.map(deg).join(', ') + ') deg',
     ];
+    const uncertainty = report.uncertainty;
+    if (uncertainty && uncertainty.pose_distance_95_mm != null) {
+      lines.push('within ' + uncertainty.pose_distance_95_mm.toFixed(3) + ' mm of the truth at 95% confidence; ' +
+        uncertainty.weak_direction.text);
+    } else if (report.uncertainty_error) {
+      lines.push('pose uncertainty not available: ' + report.uncertainty_error);
+    }
     if (report.ambiguous) lines.push('Ambiguous: other poses fit as well; take the suggested touch.');
     return lines.join('\n');
   }

@@ -1,7 +1,7 @@
 """Drives the operator page in a real headless Chromium (Debian's chromium and chromium-driver,
 scripts/browser-env.sh) through Selenium: no console errors, the WebGL twin drawn (not a blank
 canvas), another client's get shows up without a reload, Get adds a `data-inspection-id`
-element, Align puts the rms in mm in #result, Diagnose draws the diagnosis charts, and at a
+element, Align puts the rms in mm and the pose uncertainty in #result, Diagnose draws the diagnosis charts, and at a
 tablet's 800 px width nothing scrolls sideways and the buttons are finger-sized.
 
     python check_page.py URL SCREENSHOT.png EXPECTED_INSPECTIONS
@@ -110,6 +110,8 @@ def main():
         result = driver.find_element(By.ID, "result").text
         if " mm" not in result:
             raise SystemExit(f"#result has no mm: {result!r}")
+        if "mm of the truth at 95% confidence; weakest: " not in result:
+            raise SystemExit(f"#result has no pose uncertainty: {result!r}")
         # Diagnose: the verdict in #result, the charts and tables in the diagnosis panel.
         button(driver, "Diagnose").click()
         wait.until(lambda d: d.find_element(By.ID, "result").text.startswith("Diagnosis"))
