@@ -185,9 +185,7 @@ impl Mesh {
                 notes.push(warning);
                 notes.len() - 1
             });
-        let face_normals = (0..trimesh.num_triangles() as u32)
-            .map(|i| from_glam(trimesh.triangle(i).scaled_normal()).normalize())
-            .collect();
+        let face_normals = face_normals_of(&trimesh);
         Ok(Self {
             trimesh,
             watertight,
@@ -543,7 +541,11 @@ impl Mesh {
             (Feature::Face, _) => (face_normal, true),
             _ => (face_normal, false),
         };
-        let normal = normal.try_normalize(1e-15).unwrap_or(face_normal);
+        // parry's pseudo-normals are NaN next to a zero-area triangle (see `face_normals_of`).
+        let normal = normal
+            .try_normalize(1e-15)
+            .filter(|n| n.iter().all(|c| c.is_finite()))
+            .unwrap_or(face_normal);
         let offset = query.coords - point;
         let distance = offset.norm();
         // parry's inside test for a trimesh: behind the pseudo-normal of the closest feature
@@ -689,6 +691,39 @@ fn check_spread(trimesh: &TriMesh, notes: &mut Vec<String>) -> Result<(), MeshEr
 }
 
 /// Six times the signed volume enclosed by the triangles (positive for outward winding).
+/// Every triangle's unit normal. A triangle of zero area whose corners differ (on a line: parry
+/// keeps it, as it closes the mesh at a T-junction) has none, and its normalised zero would be
+/// NaN in every fit that matched it (a third-party pelvis's mesh has three): it takes the
+/// area-weighted mean of the normals of the triangles that share its corners.
+fn face_normals_of(trimesh: &TriMesh) -> Vec<Vector3<f64>> {
+    let scaled: Vec<Vector3<f64>> = (0..trimesh.num_triangles() as u32)
+        .map(|i| from_glam(trimesh.triangle(i).scaled_normal()))
+        .collect();
+    let unit = |v: &Vector3<f64>| {
+        v.try_normalize(0.0)
+            .filter(|n| n.iter().all(|c| c.is_finite()))
+    };
+    let mut normals: Vec<Option<Vector3<f64>>> = scaled.iter().map(unit).collect();
+    if normals.iter().all(Option::is_some) {
+        return normals.into_iter().flatten().collect();
+    }
+    let mut around_vertex = vec![Vector3::zeros(); trimesh.vertices().len()];
+    for (triangle, normal) in trimesh.indices().iter().zip(&scaled) {
+        if normal.iter().all(|c| c.is_finite()) {
+            for &vertex in triangle {
+                around_vertex[vertex as usize] += normal;
+            }
+        }
+    }
+    for (triangle, normal) in trimesh.indices().iter().zip(&mut normals) {
+        if normal.is_none() {
+            let around: Vector3<f64> = triangle.iter().map(|&v| around_vertex[v as usize]).sum();
+            *normal = Some(unit(&around).unwrap_or_else(Vector3::z));
+        }
+    }
+    normals.into_iter().flatten().collect()
+}
+
 fn signed_volume(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> f64 {
     triangles
         .iter()

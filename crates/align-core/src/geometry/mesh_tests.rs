@@ -159,3 +159,38 @@ fn has_surface_within_answers_as_the_closest_distance_does() {
     assert!(block.has_surface_within(&Point3::origin(), 0.025));
     assert!(!block.has_surface_within(&Point3::origin(), f64::NAN));
 }
+
+#[test]
+fn a_zero_area_triangle_closing_a_t_junction_gets_a_finite_normal() {
+    // A cube whose bottom diagonal is split on one side (triangle [0, 2, 1] into two at the
+    // diagonal's midpoint), the T-junction closed by a triangle with its three corners on the
+    // diagonal, as a third-party pelvis's mesh has them.
+    let soup = crate::geometry::shapes::box_soup([0.2, 0.2, 0.2]);
+    let mut vertices = soup.vertices.clone();
+    let middle = vertices.len() as u32;
+    vertices.push(Point3::from(
+        (vertices[1].coords + vertices[2].coords) / 2.0,
+    ));
+    let mut triangles: Vec<[u32; 3]> = soup
+        .triangles
+        .iter()
+        .copied()
+        .filter(|t| *t != [0, 2, 1])
+        .collect();
+    triangles.extend([[0, 2, middle], [0, middle, 1], [2, 1, middle]]);
+    let mesh = Mesh::new(&vertices, &triangles).unwrap();
+    assert!(mesh.is_watertight(), "{:?}", mesh.notes());
+    for triangle in 0..mesh.num_triangles() as u32 {
+        let normal = mesh.triangle_normal(triangle);
+        assert!(
+            normal.iter().all(|c| c.is_finite()) && (normal.norm() - 1.0).abs() < 1e-12,
+            "triangle {triangle}: {normal}"
+        );
+    }
+    // Below and above the split diagonal: the bottom face's normal, the distance signed.
+    for (z, signed) in [(-0.15, 0.05), (-0.08, -0.02)] {
+        let found = mesh.closest_point(&Point3::new(0.01, 0.01, z));
+        assert!(found.normal.iter().all(|c| c.is_finite()), "{found:?}");
+        assert!((found.signed_distance - signed).abs() < 1e-9, "{found:?}");
+    }
+}
