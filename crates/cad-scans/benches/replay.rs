@@ -10,8 +10,9 @@
 //! Prints, per delta, the successes (pose distance under 1 mm, as cad-scans scores), the
 //! median over the scenes of each scene's fastest run, how many successes' truths lie in the
 //! pose's reported 95 % region, how many misses are flagged (ambiguous, or loose: reported
-//! uncertain by 1 mm or more at 95 %, or without an uncertainty) and how many successes loose. The mesh and the cloud are read before
-//! the clock starts, as `cad-scans` and the peers time them.
+//! uncertain by 1 mm or more at 95 %, or without an uncertainty) and how many successes are
+//! loose. The mesh and the cloud are read before the clock starts, as `cad-scans` and the peers
+//! time them.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

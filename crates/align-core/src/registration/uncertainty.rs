@@ -1,6 +1,7 @@
 //! Pose uncertainty of a Point Set Alignment: the covariance of the aligned pose that the touch
-//! noise and the touch geometry imply, its 95 % confidence regions and the least constrained
-//! motion.
+//! noise and the touch geometry imply, its 95 % confidence regions, the least constrained motion
+//! and the pose distance it is within at 95 %. The cloud alignment's (`pca::uncertainty`) shares
+//! the model through [`uncertainty_of_observations`], its matches in place of the touches.
 //!
 //! # Model
 //!

@@ -68,8 +68,8 @@ pub fn run(args: &AlignArgs) -> Result<String, CliError> {
     }
 }
 
-/// The pose's 95 % confidence limits, its weakest direction and how far such fits end from the
-/// truth, for people.
+/// The pose's 95 % confidence limits, its weakest direction and the pose distance from the truth
+/// it is within at 95 %, for people.
 pub fn confidence_text(found: &Uncertainty) -> String {
     let position = &found.position_95_mm;
     let rotation = &found.rotation_95_mrad;

@@ -28,10 +28,10 @@ const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// The scan's noise alone made the region too small: replayed on the unseen CAD set A (`replay
 /// --full`, docs/cad-scan-trials.md), the truth lay in the 95 % region of 162 of the 186 fits
-/// within 1 mm (87 %; one part, a torso column, had 12 of its 20 outside). The residuals are not all the
-/// noise's: mixed pixels and clutter near the surface, and the scanner's noise along its rays,
-/// not the normals. This factor puts 95 % of set A's truths inside; on sets B and C, not used to
-/// choose it, 180 of 181 and 165 of 174.
+/// within 1 mm (87 %; one part, a torso column, had 12 of its 20 outside). Not all the residuals
+/// are the scanner's noise along the normals: mixed pixels and clutter near the surface, and
+/// noise along the rays. This factor puts 95 % of set A's truths inside; on sets B and C, not
+/// used to choose it, 181 of 182 and 165 of 174.
 pub(super) const NOISE_CALIBRATION: f64 = 1.4;
 
 /// The covariance of `pose` fitted to `matches` (the last matches, in the polish's band).
