@@ -70,12 +70,25 @@ struct Args {
     /// and the polish only: the same class of method as the peers), or both (`full,local`).
     #[arg(long, value_delimiter = ',', default_value = "full")]
     ips: Vec<IpsMode>,
+    /// The scanner's range noise (standard deviation along each ray), mm.
+    #[arg(long, default_value_t = 0.5, value_parser = positive_mm)]
+    range_noise_mm: f64,
     /// Only ips: no Python.
     #[arg(long)]
     no_peers: bool,
     /// Print one JSON document (rows and every trial) instead of the table.
     #[arg(long)]
     json: bool,
+}
+
+/// A noise in mm: finite and not negative.
+fn positive_mm(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(mm) if mm.is_finite() && mm >= 0.0 => Ok(mm),
+        _ => Err(format!(
+            "expected a distance in mm (finite, 0 or more), got '{text}'"
+        )),
+    }
 }
 
 fn main() -> ExitCode {
@@ -135,7 +148,10 @@ fn run(args: &Args) -> Result<String, String> {
         deltas_m: args.deltas_mm.iter().map(|d| d * 1e-3).collect(),
         scans_per_delta: args.scans,
         seed: args.seed,
-        noise: ScanNoise::default(),
+        noise: ScanNoise {
+            range_sigma_m: args.range_noise_mm * 1e-3,
+            ..ScanNoise::default()
+        },
         out_dir: args.out.clone(),
     };
     let trials = prepare_trials(&parts, &options, |done, total| {
@@ -225,4 +241,19 @@ fn report(
         std::fs::write(&path, text).map_err(|e| format!("'{}': {e}", path.display()))?;
     }
     Ok(if args.json { json } else { table })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::positive_mm;
+
+    #[test]
+    fn the_range_noise_is_a_distance_in_mm_and_anything_else_is_refused() {
+        assert_eq!(positive_mm("0.2"), Ok(0.2));
+        assert_eq!(positive_mm("0"), Ok(0.0));
+        for bad in ["-0.5", "NaN", "inf", "half"] {
+            let refused = positive_mm(bad).unwrap_err();
+            assert!(refused.contains(bad), "{refused}");
+        }
+    }
 }
