@@ -56,7 +56,7 @@ pub enum Command {
     /// by the running service with --service).
     #[command(
         name = "align-cloud",
-        after_help = "Examples:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json\n  ips align-cloud --service tcp://127.0.0.1:4000 --cloud /data/scan.xyz --cloud-scale 0.001\n      (asks the running service: its session part from the nominal pose, delta 0.1 m;\n      paths as the service sees them)\n\nThe report says how sure the pose is: whether another pose fits as well (AMBIGUOUS), the\n95% limits of position and rotation from the noise measured on the scan, the weakest motion,\nand LOOSE when the pose may be 1 mm or more from the truth."
+        after_help = "Examples:\n  ips align-cloud --cloud scan.ply --mesh part.stl --mesh-scale 0.001 \\\n      --pose 0.6,0.1,0.05,0,0,0.3 --delta 0.1 --json\n  ips align-cloud --service tcp://127.0.0.1:4000 --cloud /data/scan.xyz --cloud-scale 0.001\n      (asks the running service: its session part from the nominal pose, delta 0.1 m;\n      paths as the service sees them)\n\nThe report says how sure the pose is: whether another pose fits as well (AMBIGUOUS), the\n95% limits of position and rotation from the noise measured on the scan, the weakest motion,\nand LOOSE when the pose may be --tolerance-mm (1) or more from the truth."
     )]
     AlignCloud(commands::align_cloud::AlignCloudArgs),
     /// Hierarchical alignment of a robot in a scanner cloud: its base pose and joint values,
