@@ -203,6 +203,7 @@ fn main() {
             "weak_direction": uncertainty.map(|u| u.weak_direction.describe()),
             "uncertainty_error": last.as_ref().and_then(|r| r.uncertainty.as_ref().err()).map(ToString::to_string),
             "loose": outcome.loose,
+            "kept": last.as_ref().map(|r| r.kept),
         }));
         if index % 10 == 9 || index + 1 == dirs.len() {
             eprint!("\rreplay: {}/{}", index + 1, dirs.len());
