@@ -17,6 +17,9 @@ use crate::registration::convergence::pose_distance;
 /// 95 % efficiency for Gaussian noise).
 pub(super) const BAND_PER_SIGMA: f64 = 4.685;
 
+/// The median absolute residual times this is a robust standard deviation for Gaussian noise.
+pub(super) const MAD_TO_SIGMA: f64 = 1.4826;
+
 /// The band stays between these fractions of the schedule's last band: the lower keeps a
 /// noise-free scan from a band of nothing, the upper keeps clutter that fills the residuals out.
 const BAND_FRACTION_RANGE: (f64, f64) = (0.1, 0.5);
@@ -182,11 +185,11 @@ impl Sides {
     }
 }
 
-/// [`BAND_PER_SIGMA`] times the robust standard deviation (1.4826 times the median) of the
+/// [`BAND_PER_SIGMA`] times the robust standard deviation ([`MAD_TO_SIGMA`] times the median) of the
 /// matches' distances.
 fn robust_band(matches: &mut [Match]) -> f64 {
     let middle = matches.len() / 2;
     let (_, median, _) =
         matches.select_nth_unstable_by(middle, |a, b| a.distance.total_cmp(&b.distance));
-    BAND_PER_SIGMA * 1.4826 * median.distance
+    BAND_PER_SIGMA * MAD_TO_SIGMA * median.distance
 }

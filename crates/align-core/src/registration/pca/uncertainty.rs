@@ -17,14 +17,11 @@
 use nalgebra::Isometry3;
 
 use super::matching::Match;
-use super::polish::BAND_PER_SIGMA;
+use super::polish::{BAND_PER_SIGMA, MAD_TO_SIGMA};
 use crate::geometry::Mesh;
 use crate::registration::uncertainty::{
     PoseUncertainty, SurfaceObservation, UncertaintyError, uncertainty_of_observations,
 };
-
-/// The median absolute residual times this is a robust standard deviation for Gaussian noise.
-const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// The scan's noise alone made the region too small: replayed on the unseen CAD set A (`replay
 /// --full`, docs/cad-scan-trials.md), the truth lay in the 95 % region of 162 of the 186 fits
