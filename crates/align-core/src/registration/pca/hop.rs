@@ -26,6 +26,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::PcaOptions;
+use super::consensus::Coarse;
 use super::polish::{Polished, polish, polish_in_steps};
 use super::schedule::ScheduleRun;
 use crate::geometry::Mesh;
@@ -94,6 +95,30 @@ pub(super) fn hop(
         hopped = true;
     }
     hopped.then_some(current)
+}
+
+/// A full alignment's hop from its final `run`, along the axes only, `counted` the fine
+/// keypoints off the large planes (as the coarse score counts) and the band the schedule's
+/// last (`delta_min_m`, or `delta0_m` when smaller).
+pub(super) fn hop_from_the_end(
+    mesh: &Mesh,
+    keypoints: &[Point3<f64>],
+    coarse: &Coarse,
+    run: &ScheduleRun,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Option<ScheduleRun> {
+    let counted = coarse.off_the_planes(keypoints);
+    let band_m = options.delta_min_m.min(delta0_m);
+    hop(
+        mesh,
+        keypoints,
+        &counted,
+        run,
+        band_m,
+        options,
+        HopStarts::Shifts,
+    )
 }
 
 /// Tukey's biweight loss of each of `points` at `pose`, the band its cutoff (1 beyond it).

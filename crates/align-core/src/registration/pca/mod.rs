@@ -38,7 +38,7 @@ use self::exploration::{
     EXPLORATION_SLACK, Exploring, detected_starts, explore, explore_turns, is_wide, uniqueness,
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
-use self::hop::{HopStarts, hop};
+use self::hop::{HopStarts, hop, hop_from_the_end};
 use self::local_reach::{local_first_band, within_local_reach};
 use self::matching::{Lookup, correspond, near_surface};
 pub use self::planes::without_large_planes as without_planes_larger_than;
@@ -764,20 +764,9 @@ fn locate(
         && options.polish
         && !hopped_already
         && let Some(coarse) = &coarse
+        && let Some(better) = hop_from_the_end(mesh, &keypoints, coarse, &run, delta0_m, options)
     {
-        let counted = coarse.off_the_planes(&keypoints);
-        let last_band_m = options.delta_min_m.min(delta0_m);
-        if let Some(better) = hop(
-            mesh,
-            &keypoints,
-            &counted,
-            &run,
-            last_band_m,
-            options,
-            HopStarts::Shifts,
-        ) {
-            run = better;
-        }
+        run = better;
     }
     // Poses the coarse score cannot tell apart, compared at the scanner's scale (see
     // `tie_break`): the one that fits clearly more of the scan is the pose, and the uniqueness
