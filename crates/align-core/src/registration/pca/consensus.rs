@@ -126,10 +126,7 @@ pub(super) fn clearly_ahead(
     ends: &[(Isometry3<f64>, f64)],
 ) -> Option<usize> {
     let (found_pose, found_band_m) = found;
-    let band_m = ends
-        .iter()
-        .map(|(_, band_m)| *band_m)
-        .fold(found_band_m, f64::min);
+    let band_m = narrowest_band(found_band_m, ends);
     let found_score = consensus(mesh, counted, found_pose, band_m);
     let (best, best_score) = ends
         .iter()
@@ -137,6 +134,14 @@ pub(super) fn clearly_ahead(
         .enumerate()
         .max_by(|a, b| a.1.total_cmp(&b.1))?;
     (best_score - found_score > score_noise(best_score)).then_some(best)
+}
+
+/// The narrowest of `found_band_m` and the bands `ends` (pose, band) ended in: the pose that
+/// fits best measures the scanner's noise best, and every pose is compared in its band.
+pub(super) fn narrowest_band(found_band_m: f64, ends: &[(Isometry3<f64>, f64)]) -> f64 {
+    ends.iter()
+        .map(|(_, band_m)| *band_m)
+        .fold(found_band_m, f64::min)
 }
 
 /// How far apart two scores may lie by the sampling alone: a score counts keypoints, and a

@@ -16,7 +16,8 @@
 //! surface, where the truth fits at 0.34 mm; a start 3 mm off along one axis slides back to
 //! the truth. A full alignment therefore also hops from its final pose, along the axes only
 //! (half the starts: the turns fitted nothing more there). Counted keypoints within the
-//! narrowest band could not tell the two (424 against 403, within the count's noise of 41):
+//! narrowest band could not tell the two (a temporary trace, not kept: 424 against 403, within
+//! the count's noise of 41):
 //! the near miss's band had widened to hold its own offset points. Each end is now compared
 //! with the found pose point by point, by Tukey's biweight loss at the narrowest band (the
 //! polish's own objective), and it must win by three standard deviations of the paired
@@ -26,7 +27,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::PcaOptions;
-use super::consensus::Coarse;
+use super::consensus::{Coarse, narrowest_band};
 use super::polish::{Polished, polish, polish_in_steps};
 use super::schedule::ScheduleRun;
 use crate::geometry::Mesh;
@@ -156,7 +157,7 @@ fn fits_clearly_better(
     ends: &[(Isometry3<f64>, f64)],
 ) -> Option<usize> {
     let (found_pose, found_band_m) = found;
-    let band_m = ends.iter().map(|(_, b)| *b).fold(found_band_m, f64::min);
+    let band_m = narrowest_band(found_band_m, ends);
     // Only points near the part at either pose matter; the others lose 1 at both.
     let (lower, upper) = mesh.bounds();
     let reach = 3.0 * found_band_m;
