@@ -2,7 +2,7 @@
 //! poses a point-pair-feature detection finds, translations of the start), each scored by how
 //! much of the scan it explains, for starts too far from the truth for one run.
 
-use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::consensus::score_noise;
@@ -56,6 +56,9 @@ pub(super) struct Exploring<'a> {
     /// start instead (`PcaOptions::local_candidate`): it gets there at least as surely as a
     /// short run on coarse keypoints, and both would cost a 50 mm alignment its time twice.
     pub(super) from_start: bool,
+    /// When no spread rotation is within reach, the start turned by half the reach each way
+    /// about the part's axes (see `PcaOptions::small_turns`).
+    pub(super) small_turns: bool,
 }
 
 impl Exploring<'_> {
@@ -66,6 +69,7 @@ impl Exploring<'_> {
         slack: 1.0,
         runs_keep_planes: true,
         from_start: true,
+        small_turns: false,
     };
 }
 
@@ -187,15 +191,24 @@ pub(super) fn explore_turns(
     // Only orientations within the rotation delta allows (with margin) are tried: scaling a
     // spread set into that ball was tried and is worse, since the consensus score then prefers
     // poses that rest a large face on the floor plane.
+    let turned = |rotation: UnitQuaternion<f64>| {
+        start
+            * about_centre
+            * Isometry3::from_parts(Translation3::identity(), rotation)
+            * about_centre.inverse()
+    };
     for rotation in spread_rotations(options.starts) {
         if rotation.angle() <= max_angle {
-            candidates.push((
-                start
-                    * about_centre
-                    * Isometry3::from_parts(Translation3::identity(), rotation)
-                    * about_centre.inverse(),
-                delta0_m,
-            ));
+            candidates.push((turned(rotation), delta0_m));
+        }
+    }
+    if exploring.small_turns && candidates.len() == usize::from(exploring.from_start) {
+        let half_reach = SMALL_TURN_OF_REACH * max_angle;
+        for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+            for sign in [-1.0, 1.0] {
+                let rotation = UnitQuaternion::from_scaled_axis(axis * (sign * half_reach));
+                candidates.push((turned(rotation), delta0_m));
+            }
         }
     }
     // A detected pose is within a step or two of a pose of the part already: a run from it in
@@ -231,6 +244,9 @@ pub(super) fn explore_turns(
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     (scored, candidates.len() - usize::from(exploring.from_start))
 }
+
+/// The small turns (see [`Exploring::small_turns`]) are this fraction of the delta's reach.
+const SMALL_TURN_OF_REACH: f64 = 0.5;
 
 /// Starts spread in translation that [`pose_candidates_spread`] screens, at most.
 const SPREAD_STARTS: usize = 512;
@@ -391,4 +407,52 @@ pub(super) fn uniqueness(
         margin,
         ambiguous: score - runner_up_score <= score_noise(score),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
+
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+    use super::{Exploring, explore};
+    use crate::registration::convergence::pose_distance;
+    use crate::registration::pca::PcaOptions;
+    use crate::registration::pca::consensus::Coarse;
+    use crate::trials::clouds::{ScanOptions, scan_part};
+    use crate::trials::parts::step_block;
+
+    #[test]
+    fn below_the_spread_sets_reach_the_small_turns_run_and_one_turns_back_to_the_truth() {
+        let mesh = step_block().unwrap().mesh;
+        let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
+        let scan = ScanOptions {
+            floor: true,
+            neighbour: true,
+            ..ScanOptions::default()
+        };
+        let cloud = scan_part(&mesh, &truth, &scan);
+        let options = PcaOptions::default();
+        let coarse = Coarse::new(&mesh, &cloud, &options);
+        // A delta whose reach (1.2 delta / radius) is 0.3 rad, below the spread set's nearest
+        // turn (36 degrees), and a start turned by half of it about the part's x axis.
+        let delta_m = 0.25 * mesh.radius_m();
+        let half_reach = 0.5 * 1.2 * delta_m / mesh.radius_m();
+        let centre = mesh.centroid();
+        let about_centre = Translation3::from(centre.coords);
+        let tilt = UnitQuaternion::from_scaled_axis(Vector3::x() * half_reach);
+        let start = truth * about_centre * tilt * about_centre.inverse();
+        let exploring = |small_turns| Exploring {
+            from_start: false,
+            small_turns,
+            ..Exploring::EXACT
+        };
+        let (ends, runs) = explore(&mesh, &coarse, &start, delta_m, &options, exploring(false));
+        assert_eq!((ends.len(), runs), (0, 0));
+        let (ends, runs) = explore(&mesh, &coarse, &start, delta_m, &options, exploring(true));
+        assert_eq!((ends.len(), runs), (6, 6));
+        let radius_m = mesh.radius_m();
+        let best_off_m = pose_distance(&ends[0].1, &truth, radius_m);
+        assert!(best_off_m < 1e-3, "the best end is {best_off_m} m off");
+    }
 }

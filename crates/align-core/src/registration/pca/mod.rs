@@ -23,6 +23,7 @@ mod consensus;
 mod exploration;
 mod hop;
 mod local_reach;
+mod look_again;
 mod matching;
 mod model_to_scan;
 mod planes;
@@ -40,6 +41,8 @@ use self::exploration::{
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::hop::{HopStarts, hop, hop_from_the_end};
 use self::local_reach::{local_first_band, within_local_reach};
+pub(crate) use self::look_again::align_cloud_pose;
+use self::look_again::{Located, locate_looking_again};
 use self::matching::{Lookup, correspond, near_surface};
 pub use self::planes::without_large_planes as without_planes_larger_than;
 pub use self::planes::{floor_plane, on_a_plane, without_floor_under};
@@ -190,6 +193,15 @@ pub struct PcaOptions {
     /// lost. It costs the full alignment 20-35 ms at 50 mm (docs/BENCHMARKS.md). Off: only
     /// ends inside the material hop.
     pub hop_near_misses: bool,
+    /// A full alignment whose exploration had no turn within the delta's reach and whose polish
+    /// ended in its widest band is aligned again with `small_turns` (default; see
+    /// `look_again`). Replayed on the four unseen CAD sets: set B 182 -> 183 (scan 1), the
+    /// others unchanged (docs/cad-scan-trials.md, thirty-eighth session). Off: no second look.
+    pub look_again_when_unfit: bool,
+    /// When no turn of the spread set is within the delta's reach, the exploration turns the
+    /// start by half the reach each way about the part's three axes (six more runs). Off by
+    /// default: the second look turns it on.
+    pub small_turns: bool,
 }
 
 impl Default for PcaOptions {
@@ -230,6 +242,8 @@ impl Default for PcaOptions {
             fine_tie_break: true,
             hop_out_of_the_material: true,
             hop_near_misses: true,
+            look_again_when_unfit: true,
+            small_turns: false,
         }
     }
 }
@@ -371,7 +385,7 @@ pub fn align_cloud(
         keypoints,
         starts,
         uniqueness,
-    } = locate(mesh, cloud, base_from_part_start, delta0_m, options)?;
+    } = locate_looking_again(mesh, cloud, base_from_part_start, delta0_m, options)?;
     let bounds = mesh.bounds();
     let final_matches = correspond(
         mesh,
@@ -401,32 +415,6 @@ pub fn align_cloud(
         uniqueness,
         uncertainty: cloud_uncertainty(mesh, &final_matches, &run.pose),
     })
-}
-
-/// The pose [`align_cloud`] finds, without the residuals it reports (every keypoint matched
-/// once more, exactly: about a twentieth of a 100 mm robot fit, for figures its rigid stage
-/// never reads).
-pub(crate) fn align_cloud_pose(
-    mesh: &Mesh,
-    cloud: &[Point3<f64>],
-    base_from_part_start: &Isometry3<f64>,
-    delta0_m: f64,
-    options: &PcaOptions,
-) -> Result<Isometry3<f64>, PcaError> {
-    Ok(
-        locate(mesh, cloud, base_from_part_start, delta0_m, options)?
-            .run
-            .pose,
-    )
-}
-
-/// What [`locate`] found: the run that ended at the pose, the keypoints, the starts tried and
-/// the uniqueness.
-struct Located {
-    run: ScheduleRun,
-    keypoints: Vec<Point3<f64>>,
-    starts: usize,
-    uniqueness: Option<Uniqueness>,
 }
 
 /// [`align_cloud`] up to its pose: the checks, the exploration, the run, the runs about the
@@ -544,6 +532,7 @@ fn locate(
             slack: if wide { EXPLORATION_SLACK } else { 1.0 },
             runs_keep_planes: false,
             from_start: !options.local_candidate,
+            small_turns: options.small_turns,
         };
         let explore_here = || {
             explore(

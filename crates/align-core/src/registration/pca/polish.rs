@@ -44,6 +44,12 @@ pub(super) struct Polished {
     pub off_the_surface: Sides,
 }
 
+/// Whether a polish from the schedule's last band `schedule_band_m` ended in `band_m`, its
+/// widest: the residuals near the part spread so much that the band never narrowed.
+pub(super) fn stayed_at_widest(band_m: f64, schedule_band_m: f64) -> bool {
+    band_m >= BAND_FRACTION_RANGE.1 * schedule_band_m * (1.0 - 1e-9)
+}
+
 /// Steps from `pose` in a band of [`BAND_PER_SIGMA`] robust standard deviations of the
 /// residuals, starting from half of `band_m`, the schedule's last band. `None` when fewer than
 /// [`MIN_MATCHES`] keypoints match, too few to measure a spread.
