@@ -52,7 +52,7 @@ impl HopStarts {
     /// The polish's steps each start takes before the comparison: enough to slide into the
     /// basin it starts in, and only the best start is polished to the end. The shifts of every
     /// full alignment take two: on all four sets' 800 scenes they fitted exactly the scans six
-    /// did, for 5-10 ms less at 50 mm (docs/cad-scan-trials.md, thirty-eighth session).
+    /// did, for 2-12 ms less at 50 mm (docs/BENCHMARKS.md, thirty-eighth session).
     fn steps_per_start(self) -> usize {
         match self {
             HopStarts::ShiftsAndTurns => 6,
