@@ -190,8 +190,8 @@ pub struct PcaOptions {
     /// the four unseen CAD sets (`replay` bench, 800 scans, with the point-by-point test for
     /// both hops): full successes A 186, B 182 unchanged, C 174 -> 175, the held-out set D
     /// 144 -> 146 (its two confident misses, Centauro links 3 mm off); local B +1, D +2; none
-    /// lost. It costs the full alignment 20-35 ms at 50 mm (docs/BENCHMARKS.md). Off: only
-    /// ends inside the material hop.
+    /// lost. It cost the full alignment 20-35 ms at 50 mm, 2-12 ms less since its starts take
+    /// two steps (docs/BENCHMARKS.md). Off: only ends inside the material hop.
     pub hop_near_misses: bool,
     /// A full alignment whose exploration had no turn within the delta's reach and whose polish
     /// ended in its widest band is aligned again with `small_turns` (default; see
