@@ -151,18 +151,21 @@ pub(super) fn score_noise(score: f64) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
     use nalgebra::{Isometry3, Vector3};
 
     use super::Coarse;
+    use crate::geometry::Mesh;
     use crate::registration::pca::PcaOptions;
     use crate::trials::clouds::{ScanOptions, scan_part};
     use crate::trials::parts::step_block;
 
-    #[test]
-    fn a_pose_carried_off_the_part_explains_less_and_one_a_hair_off_as_much() {
+    /// The step block on the floor beside a neighbouring box, scanned: its mesh, its true pose
+    /// and the cloud's coarse score with the default options.
+    pub(in crate::registration::pca) fn step_block_beside_a_box() -> (Mesh, Isometry3<f64>, Coarse)
+    {
         let mesh = step_block().unwrap().mesh;
         let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
         let scan = ScanOptions {
@@ -172,6 +175,12 @@ mod tests {
         };
         let cloud = scan_part(&mesh, &truth, &scan);
         let coarse = Coarse::new(&mesh, &cloud, &PcaOptions::default());
+        (mesh, truth, coarse)
+    }
+
+    #[test]
+    fn a_pose_carried_off_the_part_explains_less_and_one_a_hair_off_as_much() {
+        let (mesh, truth, coarse) = step_block_beside_a_box();
         // Slid 300 mm along the floor, as the fine run carried the TIAGo Pro link.
         let carried_off = Isometry3::translation(0.3, 0.0, 0.0) * truth;
         let hair_off = Isometry3::translation(0.0002, 0.0, 0.0) * truth;

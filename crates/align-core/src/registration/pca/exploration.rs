@@ -413,27 +413,17 @@ pub(super) fn uniqueness(
 mod tests {
     #![allow(clippy::unwrap_used)] // Tests: a panic is the failure report.
 
-    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     use super::{Exploring, explore};
     use crate::registration::convergence::pose_distance;
     use crate::registration::pca::PcaOptions;
-    use crate::registration::pca::consensus::Coarse;
-    use crate::trials::clouds::{ScanOptions, scan_part};
-    use crate::trials::parts::step_block;
+    use crate::registration::pca::consensus::tests::step_block_beside_a_box;
 
     #[test]
     fn below_the_spread_sets_reach_the_small_turns_run_and_one_turns_back_to_the_truth() {
-        let mesh = step_block().unwrap().mesh;
-        let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
-        let scan = ScanOptions {
-            floor: true,
-            neighbour: true,
-            ..ScanOptions::default()
-        };
-        let cloud = scan_part(&mesh, &truth, &scan);
+        let (mesh, truth, coarse) = step_block_beside_a_box();
         let options = PcaOptions::default();
-        let coarse = Coarse::new(&mesh, &cloud, &options);
         // A delta whose reach (1.2 delta / radius) is 0.3 rad, below the spread set's nearest
         // turn (36 degrees), and a start turned by half of it about the part's x axis.
         let delta_m = 0.25 * mesh.radius_m();
