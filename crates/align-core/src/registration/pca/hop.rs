@@ -95,10 +95,14 @@ pub(super) fn hop(
         };
         let counted_ends: Vec<(Isometry3<f64>, f64)> =
             ends.iter().map(|end| (end.pose, end.band_m)).collect();
-        let Some(best) =
-            fits_clearly_better(mesh, counted, (&current.pose, current.delta), &counted_ends)
-                .map(|index| ends[index])
-        else {
+        let Some(best) = fits_clearly_better(
+            mesh,
+            counted,
+            (&current.pose, current.delta),
+            &counted_ends,
+            options.parallel,
+        )
+        .map(|index| ends[index]) else {
             break;
         };
         // The start's few steps found the better basin; the polish settles in it.
@@ -138,7 +142,9 @@ pub(super) fn hop_from_the_end(
     )
 }
 
-/// Tukey's biweight loss of each of `points` at `pose`, the band its cutoff (1 beyond it).
+/// Tukey's biweight loss of each of `points` at `pose`, the band its cutoff (1 beyond it). The
+/// search for a point's surface stops at the band: beyond it the loss is 1 whatever the
+/// distance, and the floor's and the neighbours' points near the part's box are most of those.
 fn biweight_losses(
     mesh: &Mesh,
     points: &[Point3<f64>],
@@ -149,11 +155,10 @@ fn biweight_losses(
     points
         .iter()
         .map(|p| {
-            let u = mesh
-                .closest_point(&(part_from_base * p))
-                .signed_distance
-                .abs()
-                / band_m;
+            let Some(found) = mesh.closest_point_within(&(part_from_base * p), band_m) else {
+                return 1.0;
+            };
+            let u = found.signed_distance.abs() / band_m;
             if u >= 1.0 {
                 1.0
             } else {
@@ -165,12 +170,16 @@ fn biweight_losses(
 
 /// Of `ends`, the one whose fit to `counted` is clearly better than `found`'s: the lowest sum
 /// of Tukey's biweight loss in the narrowest of the bands, lower than found's by more than
-/// three times the paired differences' spread (a paired z-test).
+/// three times the paired differences' spread (a paired z-test). With `parallel`, the poses'
+/// losses are computed on all threads: on a large part's scan at 50 mm the comparison's exact
+/// distances were half of the hop's time (docs/BENCHMARKS.md, thirty-ninth session); the sums
+/// are taken in the same order either way, so the answer does not depend on it.
 fn fits_clearly_better(
     mesh: &Mesh,
     counted: &[Point3<f64>],
     found: (&Isometry3<f64>, f64),
     ends: &[(Isometry3<f64>, f64)],
+    parallel: bool,
 ) -> Option<usize> {
     let (found_pose, found_band_m) = found;
     let band_m = narrowest_band(found_band_m, ends);
@@ -186,12 +195,21 @@ fn fits_clearly_better(
         })
         .copied()
         .collect();
-    let found_losses = biweight_losses(mesh, &near, found_pose, band_m);
+    // The found pose first, then every end.
+    let poses: Vec<&Isometry3<f64>> = std::iter::once(found_pose)
+        .chain(ends.iter().map(|(pose, _)| pose))
+        .collect();
+    let losses_at = |pose: &&Isometry3<f64>| biweight_losses(mesh, &near, pose, band_m);
+    let losses: Vec<Vec<f64>> = if parallel {
+        poses.par_iter().map(losses_at).collect()
+    } else {
+        poses.iter().map(losses_at).collect()
+    };
+    let (found_losses, end_losses) = losses.split_first()?;
     let mut best: Option<(usize, f64)> = None;
-    for (index, (pose, _)) in ends.iter().enumerate() {
-        let losses = biweight_losses(mesh, &near, pose, band_m);
+    for (index, losses) in end_losses.iter().enumerate() {
         let (mut gain, mut spread) = (0.0, 0.0);
-        for (a, b) in found_losses.iter().zip(&losses) {
+        for (a, b) in found_losses.iter().zip(losses) {
             gain += a - b;
             spread += (a - b) * (a - b);
         }
@@ -282,21 +300,30 @@ mod tests {
         let hair_off = Isometry3::translation(0.00005, 0.0, 0.0) * truth;
         let far = Isometry3::translation(0.3, 0.0, 0.0) * truth;
         let ends = [(far, band_m), (truth, band_m), (hair_off, band_m)];
-        // From the near miss the truth fits clearly better (the hair-off pose as well, less).
-        assert_eq!(
-            fits_clearly_better(&mesh, &keypoints, (&near_miss, band_m), &ends),
-            Some(1)
-        );
-        // From the truth, nothing; a pose 50 um off fits as well, within the noise.
-        let others = [(near_miss, band_m), (hair_off, band_m), (far, band_m)];
-        assert_eq!(
-            fits_clearly_better(&mesh, &keypoints, (&truth, band_m), &others),
-            None
-        );
-        assert_eq!(
-            fits_clearly_better(&mesh, &keypoints, (&hair_off, band_m), &[(truth, band_m)]),
-            None
-        );
+        // On all threads or one, the same answer.
+        for parallel in [false, true] {
+            // From the near miss the truth fits clearly better (the hair-off pose as well, less).
+            assert_eq!(
+                fits_clearly_better(&mesh, &keypoints, (&near_miss, band_m), &ends, parallel),
+                Some(1)
+            );
+            // From the truth, nothing; a pose 50 um off fits as well, within the noise.
+            let others = [(near_miss, band_m), (hair_off, band_m), (far, band_m)];
+            assert_eq!(
+                fits_clearly_better(&mesh, &keypoints, (&truth, band_m), &others, parallel),
+                None
+            );
+            assert_eq!(
+                fits_clearly_better(
+                    &mesh,
+                    &keypoints,
+                    (&hair_off, band_m),
+                    &[(truth, band_m)],
+                    parallel,
+                ),
+                None
+            );
+        }
     }
 
     #[test]

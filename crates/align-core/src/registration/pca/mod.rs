@@ -517,32 +517,38 @@ fn locate(
     // The local stage's run, when its end is the best: it has run the schedule down to the
     // narrowest band on the fine keypoints and polished, all the run below would do again.
     let mut local_won: Option<ScheduleRun> = None;
-    let coarse = (options.starts > 0).then(|| Coarse::new(mesh, cloud, options));
-    if let Some(coarse) = &coarse {
+    let mut coarse: Option<Coarse> = None;
+    if options.starts > 0 {
         let wide = options.wide_exploration && is_wide(mesh, delta0_m);
-        let detected = if wide {
-            detected_starts(mesh, cloud, coarse, base_from_part_start, delta0_m)
-        } else {
-            Vec::new()
-        };
-        // Below a wide delta the runs' bands are narrow and exact queries cheap; with the slack,
-        // the one run a 50 mm step-block trial made ended 67 mm off (docs/pca-trials.md).
-        let exploring = Exploring {
-            detected: &detected,
-            slack: if wide { EXPLORATION_SLACK } else { 1.0 },
-            runs_keep_planes: false,
-            from_start: !options.local_candidate,
-            small_turns: options.small_turns,
-        };
+        // The scan's coarse keypoints and planes, the detection and the exploration, beside the
+        // local stage, which needs none of them: serial, they were 6-9 ms of a 50 mm alignment
+        // before the two sides began (docs/BENCHMARKS.md, thirty-ninth session).
         let explore_here = || {
-            explore(
+            let coarse = Coarse::new(mesh, cloud, options);
+            let detected = if wide {
+                detected_starts(mesh, cloud, &coarse, base_from_part_start, delta0_m)
+            } else {
+                Vec::new()
+            };
+            // Below a wide delta the runs' bands are narrow and exact queries cheap; with the
+            // slack, the one run a 50 mm step-block trial made ended 67 mm off
+            // (docs/pca-trials.md).
+            let exploring = Exploring {
+                detected: &detected,
+                slack: if wide { EXPLORATION_SLACK } else { 1.0 },
+                runs_keep_planes: false,
+                from_start: !options.local_candidate,
+                small_turns: options.small_turns,
+            };
+            let explored = explore(
                 mesh,
-                coarse,
+                &coarse,
                 base_from_part_start,
                 delta0_m,
                 options,
                 exploring,
-            )
+            );
+            (coarse, explored)
         };
         // The local stage's end, when it runs: a refusal there (too few points within its
         // reach) leaves the exploration's ends alone.
@@ -559,11 +565,12 @@ fn locate(
                 .flatten()
                 .map(|located| located.run)
         };
-        let ((mut scored, explored), local_end) = if options.parallel {
+        let ((made, (mut scored, explored)), local_end) = if options.parallel {
             rayon::join(explore_here, local_here)
         } else {
             (explore_here(), local_here())
         };
+        let coarse = coarse.insert(made);
         if let Some(local_run) = local_end {
             let pose = local_run.pose;
             scored.push((coarse.score(mesh, &pose), pose));
@@ -678,21 +685,24 @@ fn locate(
         // rests on the floor as well (crates/align-core/tests/pca.rs), and without them none
         // did; with them only, one of three cylinder scans was reported unique
         // (crates/cad-scans/tests/refusals.rs).
-        let mut around = Vec::new();
-        let plane_sets: &[bool] = if options.without_large_planes {
-            &[true, false]
-        } else {
-            &[true]
-        };
-        for &runs_keep_planes in plane_sets {
+        let around_with = |runs_keep_planes: bool| {
             let exploring = Exploring {
                 runs_keep_planes,
                 ..Exploring::EXACT
             };
-            let (ends, _) =
-                explore_turns(mesh, coarse, &run.pose, max_angle, band, options, exploring);
-            around.extend(ends);
-        }
+            explore_turns(mesh, coarse, &run.pose, max_angle, band, options, exploring).0
+        };
+        // Both sets at once: a part with no turn in the delta's reach runs one run a set, which
+        // left a core idle (3-4 ms of a 50 mm alignment, docs/BENCHMARKS.md).
+        let mut around = match (options.without_large_planes, options.parallel) {
+            (true, true) => {
+                let (mut with, without) = rayon::join(|| around_with(true), || around_with(false));
+                with.extend(without);
+                with
+            }
+            (true, false) => [around_with(true), around_with(false)].concat(),
+            (false, _) => around_with(true),
+        };
         around.sort_by(|a, b| b.0.total_cmp(&a.0));
         let found_score = coarse.score(mesh, &run.pose);
         if let Some((better_score, better)) = around.first()
