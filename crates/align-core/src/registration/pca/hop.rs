@@ -171,9 +171,9 @@ fn biweight_losses(
 /// Of `ends`, the one whose fit to `counted` is clearly better than `found`'s: the lowest sum
 /// of Tukey's biweight loss in the narrowest of the bands, lower than found's by more than
 /// three times the paired differences' spread (a paired z-test). With `parallel`, the poses'
-/// losses are computed on all threads: on a large part's scan at 50 mm the comparison's exact
-/// distances were half of the hop's time (docs/BENCHMARKS.md, thirty-ninth session); the sums
-/// are taken in the same order either way, so the answer does not depend on it.
+/// losses are computed on all threads: at 50 mm the comparison was about half of the hop's
+/// time (a temporary probe, not kept; docs/BENCHMARKS.md, thirty-ninth session). The sums are
+/// taken in the same order either way, so the answer does not depend on it.
 fn fits_clearly_better(
     mesh: &Mesh,
     counted: &[Point3<f64>],

@@ -693,7 +693,7 @@ fn locate(
             explore_turns(mesh, coarse, &run.pose, max_angle, band, options, exploring).0
         };
         // Both sets at once: a part with no turn in the delta's reach runs one run a set, which
-        // left a core idle (3-4 ms of a 50 mm alignment, docs/BENCHMARKS.md).
+        // left a core idle (docs/BENCHMARKS.md, thirty-ninth session).
         let mut around = match (options.without_large_planes, options.parallel) {
             (true, true) => {
                 let (mut with, without) = rayon::join(|| around_with(true), || around_with(false));
