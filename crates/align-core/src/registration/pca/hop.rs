@@ -144,7 +144,7 @@ pub(super) fn hop_from_the_end(
 
 /// Tukey's biweight loss of each of `points` at `pose`, the band its cutoff (1 beyond it). The
 /// search for a point's surface stops at the band: beyond it the loss is 1 whatever the
-/// distance, and the floor's and the neighbours' points near the part's box are most of those.
+/// distance (the floor's and a neighbour's points near the part's box, the scan's far side).
 fn biweight_losses(
     mesh: &Mesh,
     points: &[Point3<f64>],

@@ -521,8 +521,8 @@ fn locate(
     if options.starts > 0 {
         let wide = options.wide_exploration && is_wide(mesh, delta0_m);
         // The scan's coarse keypoints and planes, the detection and the exploration, beside the
-        // local stage, which needs none of them: serial, they were 6-9 ms of a 50 mm alignment
-        // before the two sides began (docs/BENCHMARKS.md, thirty-ninth session).
+        // local stage, which needs none of them: serial, they took 6-9 ms of a 50 mm alignment
+        // (a probe) before the two sides began (docs/BENCHMARKS.md, thirty-ninth session).
         let explore_here = || {
             let coarse = Coarse::new(mesh, cloud, options);
             let detected = if wide {
