@@ -39,6 +39,13 @@ const HOP_FRACTION_OF_BAND: f64 = 0.3;
 /// At most this many hops in a row: each from the pose the last one reached.
 const MAX_HOPS: usize = 2;
 
+/// A start's steps match about this many keypoints at most (one in every n): they only find the
+/// basin the start lies in, and the comparison and the last polish use every keypoint. The
+/// links of the 50 mm CAD scans had 700-2400 keypoints near them, and the six starts' two steps
+/// on all of them were about two thirds of the hop's time (a temporary probe); every scene of
+/// the four unseen sets ends as before (docs/BENCHMARKS.md, fortieth session).
+const SETTLE_MATCHES_PER_STEP: f64 = 600.0;
+
 /// Which starts a hop polishes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum HopStarts {
@@ -85,7 +92,7 @@ pub(super) fn hop(
                 start,
                 band_m,
                 options,
-                kinds.steps_per_start(),
+                (kinds.steps_per_start(), SETTLE_MATCHES_PER_STEP),
             )
         };
         let ends: Vec<Polished> = if options.parallel {

@@ -8,7 +8,7 @@ use nalgebra::{Isometry3, Point3};
 
 use super::PcaOptions;
 use super::matching::{Lookup, Match, NO_HINT, correspond};
-use super::schedule::FIXED_POINT_FRACTION;
+use super::schedule::{FIXED_POINT_FRACTION, MATCHES_PER_STEP, kept_at_stride, thinning_to};
 use super::step::step_for;
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
@@ -60,17 +60,25 @@ pub(super) fn polish(
     band_m: f64,
     options: &PcaOptions,
 ) -> Option<Polished> {
-    polish_in_steps(mesh, keypoints, pose, band_m, options, MAX_ITERATIONS)
+    polish_in_steps(
+        mesh,
+        keypoints,
+        pose,
+        band_m,
+        options,
+        (MAX_ITERATIONS, MATCHES_PER_STEP),
+    )
 }
 
-/// [`polish`] in at most `max_steps` steps.
+/// [`polish`] in at most `max_steps` steps, matching about `matches_per_step` keypoints a step
+/// at most (one in every n of them, see [`thinning_to`]).
 pub(super) fn polish_in_steps(
     mesh: &Mesh,
     keypoints: &[Point3<f64>],
     pose: &Isometry3<f64>,
     band_m: f64,
     options: &PcaOptions,
-    max_steps: usize,
+    (max_steps, matches_per_step): (usize, f64),
 ) -> Option<Polished> {
     let (lower, upper) = mesh.bounds();
     // The polish moves the part by millimetres: the keypoints within the schedule's band of the
@@ -86,11 +94,11 @@ pub(super) fn polish_in_steps(
         })
         .copied()
         .collect();
-    let stride = super::schedule::thinning_for(near.len() as f64);
+    let stride = thinning_to(near.len() as f64, matches_per_step);
     let near: Vec<Point3<f64>> = near
         .into_iter()
         .enumerate()
-        .filter(|(i, _)| super::schedule::kept_at_stride(*i, stride))
+        .filter(|(i, _)| kept_at_stride(*i, stride))
         .map(|(_, p)| p)
         .collect();
     let exact = Lookup::exact(options.parallel);

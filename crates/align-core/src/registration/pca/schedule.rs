@@ -596,13 +596,18 @@ fn cycle_period(recent: &[(Isometry3<f64>, f64)], radius_m: f64, reach_m: f64) -
 /// one of every n (see [`kept_at_stride`]), and so does the polish. A link of the IRB 1600's
 /// size matched 10-20 thousand 5 mm keypoints in each of its fine bands, which fix a pose to
 /// microns with far fewer (docs/cad-scan-trials.md).
-const MATCHES_PER_STEP: f64 = 4000.0;
+pub(super) const MATCHES_PER_STEP: f64 = 4000.0;
 
 /// How many of a level's keypoints one kept stands for when a step would match `matches` of
 /// them all (see [`MATCHES_PER_STEP`]).
 pub(super) fn thinning_for(matches: f64) -> usize {
-    if matches.is_finite() && matches > MATCHES_PER_STEP {
-        (matches / MATCHES_PER_STEP).floor() as usize
+    thinning_to(matches, MATCHES_PER_STEP)
+}
+
+/// [`thinning_for`] with at most about `per_step` matches a step.
+pub(super) fn thinning_to(matches: f64, per_step: f64) -> usize {
+    if matches.is_finite() && per_step >= 1.0 && matches > per_step {
+        (matches / per_step).floor() as usize
     } else {
         1
     }

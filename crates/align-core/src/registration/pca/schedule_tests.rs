@@ -159,6 +159,10 @@ fn a_thinned_level_keeps_one_keypoint_in_stride_spread_over_the_cloud_and_the_sa
     assert_eq!(thinning_for(MATCHES_PER_STEP), 1);
     assert_eq!(thinning_for(2.9 * MATCHES_PER_STEP), 2);
     assert_eq!(thinning_for(f64::NAN), 1);
+    // A smaller cap (a hop's settling steps), and none below one match a step.
+    assert_eq!(thinning_to(2000.0, 600.0), 3);
+    assert_eq!(thinning_to(600.0, 600.0), 1);
+    assert_eq!(thinning_to(2000.0, 0.0), 1);
     let (mesh, _) = box_scan();
     let (lower, upper) = mesh.bounds();
     let mut rng = SplitMix64::new(5);
