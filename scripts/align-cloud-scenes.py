@@ -13,7 +13,11 @@ Each scene (a folder from `cad-scans --out`, or a folder of links to them) has `
 thesis's pose distance to the truth, the part's radius the largest distance of its distinct
 vertices from their mean (as `Mesh::radius_m`); success is under 1 mm, as the replay bench
 counts. The time is the alignment's own `time_s` (the process's start and the files' reading
-are left out), the median of --runs runs a scene, so that it compares with the replay bench's.
+are left out), the median of --runs runs a scene (the replay bench keeps a scene's fastest).
+
+The start goes to `ips` as text (x, y, z, roll, pitch, yaw), which differs from the scene's
+matrix in the last bits: a part whose twins score exactly alike (reported AMBIGUOUS, margin 0)
+may then end at the other twin than the replay bench's.
 """
 
 import argparse
