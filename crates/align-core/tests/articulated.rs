@@ -163,6 +163,64 @@ fn random_configurations_of_both_robots_recover_every_visible_link_to_a_millimet
     }
 }
 
+/// Each joint's 95 % interval holds its true value in most fits, and is reported only for
+/// joints the scan fixes on their own. The robot's own scans (the scanner sees the meshes the
+/// fit uses), so this checks the sums, not the noise calibration (see `fit::uncertainty`).
+#[test]
+fn each_joints_95_percent_interval_holds_its_truth_in_most_fits() {
+    let mut rng = TrialRng::new(29);
+    let (mut counted, mut inside) = (0, 0);
+    let mut misses = Vec::new();
+    for robot in [ShippedRobot::Ur10, ShippedRobot::Iiwa14] {
+        let body = ArticulatedBody::from_model(&robot.model().expect("shipped URDF loads"))
+            .expect("shipped robot has surfaces");
+        for case in 0..4u64 {
+            let q_true = random_configuration(robot, &mut rng);
+            let scan = RobotScanOptions {
+                seed: 200 + case,
+                ..RobotScanOptions::default()
+            };
+            let truth = cell_pose();
+            let cloud = scan_robot(&body, &truth, &q_true, &scan);
+            let (base, q0) = perturb_robot(&body, &truth, &q_true, 0.05, &mut rng);
+            let fit = align_robot(&body, &cloud, &base, &q0, 0.05, &RobotFitOptions::default())
+                .expect("the fit runs");
+            for (joint, truth) in fit.joints.iter().zip(&q_true) {
+                let Some(within) = joint.within_95 else {
+                    // Only a joint the scan does not fix alone goes without.
+                    assert!(
+                        !joint.observed || joint.turns_with_base,
+                        "{} case {case}: {joint:?}",
+                        robot.name()
+                    );
+                    continue;
+                };
+                assert!(joint.observed && !joint.turns_with_base, "{joint:?}");
+                // The links are fitted to well under a millimetre: a joint to a few mrad.
+                assert!(within > 0.0 && within < 0.01, "{joint:?}");
+                counted += 1;
+                if (joint.value - truth).abs() <= within {
+                    inside += 1;
+                } else {
+                    misses.push(format!(
+                        "{} case {case} {}: off {:.3} mrad, interval {:.3} mrad",
+                        robot.name(),
+                        joint.name,
+                        (joint.value - truth).abs() * 1e3,
+                        within * 1e3
+                    ));
+                }
+            }
+        }
+    }
+    eprintln!("{inside} of {counted} inside; outside: {misses:?}");
+    assert!(counted >= 30, "{counted} intervals");
+    assert!(
+        10 * inside >= 9 * counted,
+        "{inside} of {counted}: {misses:?}"
+    );
+}
+
 /// Starts half a metre off: the base by up to 0.5 m and about 0.5 rad, every joint moving its
 /// farthest point by up to 0.5 m (the wrists by up to half a turn). The beam search, the
 /// proximal base candidates and the half-turn check are what recover these.

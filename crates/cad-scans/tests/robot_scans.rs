@@ -251,3 +251,72 @@ fn the_abb_wrist_a_gain_most_keypoints_agree_on_is_taken_at_500_mm() {
     };
     no_link_fails_with_seed(&body, &ABB_TRIAL_HOME, 77, 4, 0.5, &[0]);
 }
+
+/// The fit's 95 % joint intervals against the truth, on ray-cast scans (mixed pixels, a floor and
+/// a box, 0.5 mm noise): `(inside, counted)` over `scenes` fitted from 50 mm starts, and the
+/// joints outside.
+fn joints_within_their_intervals(
+    body: &ArticulatedBody,
+    home: &[f64],
+    scenes: std::ops::Range<usize>,
+) -> (usize, usize, Vec<String>) {
+    use align_core::registration::articulated::{RobotFitOptions, align_robot};
+    use align_core::trials::TrialRng;
+    use align_core::trials::robot_trials::perturb_robot;
+    let (mut inside, mut counted, mut outside) = (0, 0, Vec::new());
+    for scene in scenes {
+        let scanned = seeded_scene(body, home, SPREAD_RAD, SEED, scene, &ScanNoise::default())
+            .expect("the scene scans");
+        let mut rng = TrialRng::new(SEED ^ scene as u64);
+        let (base, q0) = perturb_robot(body, &scanned.world_from_root, &scanned.q, 0.05, &mut rng);
+        let fit = align_robot(
+            body,
+            &scanned.cloud(),
+            &base,
+            &q0,
+            0.05,
+            &RobotFitOptions::default(),
+        )
+        .expect("the fit runs");
+        for (joint, truth) in fit.joints.iter().zip(&scanned.q) {
+            let Some(within) = joint.within_95 else {
+                continue;
+            };
+            counted += 1;
+            let off = (joint.value - truth).abs();
+            if off <= within {
+                inside += 1;
+            } else {
+                outside.push(format!(
+                    "scene {scene} {}: off {:.3} mrad, interval {:.3} mrad",
+                    joint.name,
+                    off * 1e3,
+                    within * 1e3
+                ));
+            }
+        }
+    }
+    (inside, counted, outside)
+}
+
+/// Each joint's 95 % interval holds its truth in at least nine fits of ten, on scans the fit's
+/// model did not make: ray-cast, with mixed pixels at depth edges. Measured when written: the
+/// UR10 23 of 24 (one shoulder lift 1.2 mrad off, its interval 0.5), the ABB 30 of 30.
+#[test]
+fn each_joints_95_percent_interval_holds_its_truth_in_ray_cast_scans() {
+    let robot = ShippedRobot::Ur10;
+    let body = ArticulatedBody::from_model(&robot.model().expect("shipped")).expect("surfaces");
+    let mut robots = vec![("UR10", body, robot.home())];
+    if let Some(abb) = abb_irb1600() {
+        robots.push(("ABB IRB 1600", abb, ABB_TRIAL_HOME.to_vec()));
+    }
+    for (name, body, home) in &robots {
+        let (inside, counted, outside) = joints_within_their_intervals(body, home, 0..6);
+        eprintln!("{name}: {inside} of {counted} inside; {outside:?}");
+        assert!(counted >= 20, "{name}: {counted} intervals");
+        assert!(
+            10 * inside >= 9 * counted,
+            "{name}: {inside} of {counted}: {outside:?}"
+        );
+    }
+}

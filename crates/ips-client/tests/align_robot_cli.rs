@@ -141,6 +141,17 @@ fn the_shipped_ur10_is_found_in_a_cluttered_scan() {
         .map(|j| j["turns_with_base"].as_bool().unwrap())
         .collect();
     assert_eq!(flags, [true, false, false, false, false, false], "{result}");
+    // Each joint's 95 % interval: none for the pan (its split with the base is the start's),
+    // a fraction of a degree for the others the scan shows, none for those it does not.
+    for (index, joint) in result["joints"].as_array().unwrap().iter().enumerate() {
+        let within = &joint["within_95"];
+        if index == 0 || !joint["observed"].as_bool().unwrap() {
+            assert!(within.is_null(), "{joint}");
+        } else {
+            let rad = within.as_f64().unwrap();
+            assert!(rad > 0.0 && rad < 0.01, "{joint}");
+        }
+    }
 }
 
 /// Writes a robot of its own into `dir`: a box base, an L-shaped mesh arm (package://my_robot)

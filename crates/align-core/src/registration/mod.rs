@@ -11,6 +11,7 @@ pub mod convergence;
 pub mod pca;
 pub mod ppf;
 pub mod psa;
+pub(crate) mod robust_scale;
 pub mod sampling;
 pub mod svd;
 pub mod uncertainty;

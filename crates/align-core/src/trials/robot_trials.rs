@@ -508,6 +508,7 @@ mod tests {
                     value,
                     observed,
                     turns_with_base: false,
+                    within_95: None,
                 })
                 .collect(),
             iterations: 0,

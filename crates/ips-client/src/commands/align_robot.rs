@@ -66,6 +66,12 @@ pub struct JointJson {
     /// True for the first joint above a round base: the scan fixes the base's yaw about the
     /// joint's axis plus the joint's value, not each; the split is the start's.
     pub turns_with_base: bool,
+    /// Half the value's 95 % interval from the scan's noise and geometry, rad (m for a
+    /// prismatic joint); null when the joint is not observed or not fixed on its own.
+    pub within_95: Option<f64>,
+    /// The interval's unit in the text: metres for a prismatic joint, else radians.
+    #[serde(skip)]
+    pub prismatic: bool,
 }
 
 /// DESIGN.md 6.4 keys, plus `joints`, `rms`, `iterations`, `cloud_points`.
@@ -154,11 +160,14 @@ pub fn run(args: &AlignRobotArgs) -> Result<AlignRobotOutput, BadInput> {
         joints: fit
             .joints
             .iter()
-            .map(|joint| JointJson {
+            .zip(body.parameters())
+            .map(|(joint, parameter)| JointJson {
                 name: joint.name.clone(),
                 value: joint.value,
                 observed: joint.observed,
                 turns_with_base: joint.turns_with_base,
+                within_95: joint.within_95,
+                prismatic: parameter.prismatic,
             })
             .collect(),
         rms: fit.rms_m,
@@ -186,10 +195,22 @@ impl AlignRobotOutput {
             "base pose: xyz [m] {x:.6} {y:.6} {z:.6}, rpy [rad] {roll:.6} {pitch:.6} {yaw:.6}\n"
         );
         for joint in &self.joints {
+            let within = joint
+                .within_95
+                .map(|half| {
+                    // A prismatic joint's interval is in metres: shown in mm, a turn's in mrad.
+                    format!(
+                        "  +-{:.3} m{} (95 %)",
+                        half * 1e3,
+                        if joint.prismatic { "m" } else { "rad" }
+                    )
+                })
+                .unwrap_or_default();
             text += &format!(
-                "  {:<24} {:>11.6}{}\n",
+                "  {:<24} {:>11.6}{}{}\n",
                 joint.name,
                 crate::display_round(joint.value, 6),
+                within,
                 if !joint.observed {
                     "  (not observed: start value kept)"
                 } else if joint.turns_with_base {

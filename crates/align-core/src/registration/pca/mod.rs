@@ -31,7 +31,7 @@ mod polish;
 mod schedule;
 mod step;
 mod tie_break;
-mod uncertainty;
+pub(crate) mod uncertainty;
 
 pub use self::consensus::scan_consensus;
 use self::consensus::{Coarse, consensus, score_noise};

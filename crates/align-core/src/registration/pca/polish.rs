@@ -13,12 +13,9 @@ use super::step::step_for;
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
 
-/// Residuals this many robust standard deviations off still count (Tukey's biweight constant:
-/// 95 % efficiency for Gaussian noise).
-pub(super) const BAND_PER_SIGMA: f64 = 4.685;
-
-/// The median absolute residual times this is a robust standard deviation for Gaussian noise.
-pub(super) const MAD_TO_SIGMA: f64 = 1.4826;
+/// The polish's band is this many robust standard deviations of the residuals (Tukey's
+/// biweight constant), each the median absolute residual times `MAD_TO_SIGMA`.
+pub(super) use crate::registration::robust_scale::{BIWEIGHT_C as BAND_PER_SIGMA, MAD_TO_SIGMA};
 
 /// The band stays between these fractions of the schedule's last band: the lower keeps a
 /// noise-free scan from a band of nothing, the upper keeps clutter that fills the residuals out.

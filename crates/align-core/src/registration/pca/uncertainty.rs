@@ -19,6 +19,7 @@ use nalgebra::Isometry3;
 use super::matching::Match;
 use super::polish::{BAND_PER_SIGMA, MAD_TO_SIGMA};
 use crate::geometry::Mesh;
+use crate::registration::robust_scale::biweight_scale;
 use crate::registration::uncertainty::{
     PoseUncertainty, SurfaceObservation, UncertaintyError, uncertainty_of_observations,
 };
@@ -29,7 +30,7 @@ use crate::registration::uncertainty::{
 /// are the scanner's noise along the normals: mixed pixels and clutter near the surface, and
 /// noise along the rays. This factor puts 95 % of set A's truths inside; on sets B and C, not
 /// used to choose it, 181 of 182 and 165 of 174.
-pub(super) const NOISE_CALIBRATION: f64 = 1.4;
+pub(crate) const NOISE_CALIBRATION: f64 = 1.4;
 
 /// The covariance of `pose` fitted to `matches` (the last matches, in the polish's band).
 pub(super) fn cloud_uncertainty(
@@ -47,45 +48,22 @@ pub(super) fn cloud_uncertainty(
             what: format!("the residual of match {index}"),
         });
     }
-    if signed.len() <= parameters {
-        return Err(UncertaintyError::TooFewResiduals {
-            residuals: signed.len(),
+    let scale = biweight_scale(&signed, parameters, BAND_PER_SIGMA * MAD_TO_SIGMA).map_err(
+        |residuals| UncertaintyError::TooFewResiduals {
+            residuals,
             parameters,
-        });
-    }
-    let mut magnitudes: Vec<f64> = signed.iter().map(|r| r.abs()).collect();
-    let middle = magnitudes.len() / 2;
-    let (_, median, _) = magnitudes.select_nth_unstable_by(middle, f64::total_cmp);
-    let cutoff_m = BAND_PER_SIGMA * MAD_TO_SIGMA * *median;
-    let mut observations = Vec::with_capacity(matches.len());
-    // Σ ψ(r)² and Σ ψ'(r), Tukey's biweight at the cutoff.
-    let (mut psi_squared, mut psi_slope) = (0.0, 0.0);
-    for (m, r) in matches.iter().zip(&signed) {
-        // A noise-free fit (half its residuals zero) keeps its exact matches, at noise 0.
-        let (kept, u2) = if cutoff_m > 0.0 {
-            (r.abs() < cutoff_m, (r / cutoff_m).powi(2))
-        } else {
-            (*r == 0.0, 0.0)
-        };
-        if !kept {
-            continue;
-        }
-        let psi = r * (1.0 - u2).powi(2);
-        psi_squared += psi * psi;
-        psi_slope += (1.0 - u2) * (1.0 - 5.0 * u2);
-        observations.push(SurfaceObservation {
+        },
+    )?;
+    let observations: Vec<SurfaceObservation> = matches
+        .iter()
+        .zip(&scale.kept)
+        .filter(|(_, kept)| **kept)
+        .map(|(m, _)| SurfaceObservation {
             surface: m.surface,
             direction: m.normal,
-        });
-    }
-    let n = observations.len();
-    if n <= parameters || psi_slope <= 0.0 {
-        return Err(UncertaintyError::TooFewResiduals {
-            residuals: n,
-            parameters,
-        });
-    }
-    let sigma_m = (psi_squared / (n - parameters) as f64).sqrt() / (psi_slope / n as f64);
+        })
+        .collect();
+    let sigma_m = scale.sigma_m;
     uncertainty_of_observations(
         &observations,
         pose,

@@ -102,6 +102,7 @@ mod report;
 #[cfg(test)]
 mod tests;
 mod tree;
+mod uncertainty;
 
 use std::time::Instant;
 
@@ -400,17 +401,25 @@ pub fn align_robot(
     let with_base = round_base
         .and(search_order(body).first().copied())
         .filter(|&first| observed[first]);
+    let placed = placed::Placed::new(body, &world_from_root, &q);
+    let intervals = uncertainty::joint_intervals_95(body, &placed, &matches, &observed);
     let joints = body
         .parameters()
         .iter()
         .zip(&q)
         .zip(&observed)
+        .zip(intervals)
         .enumerate()
-        .map(|(index, ((parameter, &value), &observed))| JointFit {
-            name: parameter.name.clone(),
-            value,
-            observed,
-            turns_with_base: with_base == Some(index),
+        .map(|(index, (((parameter, &value), &observed), within_95))| {
+            let turns_with_base = with_base == Some(index);
+            JointFit {
+                name: parameter.name.clone(),
+                value,
+                observed,
+                turns_with_base,
+                // The scan fixes the base's yaw plus this value, not each.
+                within_95: within_95.filter(|_| !turns_with_base),
+            }
         })
         .collect();
     let sum: f64 = matches.iter().map(|m| m.distance * m.distance).sum();

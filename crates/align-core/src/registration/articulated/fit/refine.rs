@@ -4,7 +4,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion
 
 use super::RobotFitOptions;
 use super::placed::{Match, Placed, correspond, placed_radius};
-use crate::registration::articulated::body::ArticulatedBody;
+use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
 
 /// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.
 pub(super) fn refine(
@@ -197,11 +197,7 @@ pub(super) fn normal_equations(
     per_link: bool,
 ) -> NormalEquations {
     let n = 6 + body.parameters().len();
-    let axes = body.axes(&placed.poses);
-    let centre = placed.poses[body.root()].translation.vector;
-    let joints_above: Vec<Vec<usize>> = (0..body.links().len())
-        .map(|link| body.joints_above(link))
-        .collect();
+    let rows = JacobianRows::new(body, placed, scale);
     let links = body.links().len();
     let mut normal = DMatrix::zeros(n, n);
     let mut link_normals: Vec<DMatrix<f64>> = if per_link {
@@ -213,22 +209,7 @@ pub(super) fn normal_equations(
     let mut rhs = DVector::zeros(n);
     let mut row = DVector::zeros(n);
     for m in matches {
-        row.fill(0.0);
-        let lever = (m.surface.coords - centre).cross(&m.normal) / scale;
-        for axis in 0..3 {
-            row[axis] = lever[axis];
-            row[3 + axis] = m.normal[axis];
-        }
-        for &joint in &joints_above[m.link] {
-            if let Some((frame, parameter, multiplier)) = axes[joint] {
-                row[6 + parameter] += multiplier
-                    * if frame.prismatic {
-                        frame.axis.dot(&m.normal)
-                    } else {
-                        frame.axis.dot(&(m.surface - frame.origin).cross(&m.normal)) / scale
-                    };
-            }
-        }
+        rows.fill(m, &mut row);
         let residual = m.normal.dot(&(m.point - m.surface));
         if per_link {
             link_normals[m.link].syger(m.weight, &row, &row, 1.0);
@@ -252,6 +233,50 @@ pub(super) fn normal_equations(
         rhs,
         link_normals,
         link_weights,
+    }
+}
+
+/// The point-to-plane Jacobian's rows: a match's motion along its normal per unit of each
+/// parameter, the base's turn (about the root's origin) and shift, then the joints'. Turns
+/// (the base's and revolute joints') are per `scale` metres of arc, so that every column is in
+/// metres.
+pub(super) struct JacobianRows {
+    axes: Vec<Option<(JointAxis, usize, f64)>>,
+    joints_above: Vec<Vec<usize>>,
+    centre: Vector3<f64>,
+    scale: f64,
+}
+
+impl JacobianRows {
+    pub(super) fn new(body: &ArticulatedBody, placed: &Placed, scale: f64) -> Self {
+        Self {
+            axes: body.axes(&placed.poses),
+            joints_above: (0..body.links().len())
+                .map(|link| body.joints_above(link))
+                .collect(),
+            centre: placed.poses[body.root()].translation.vector,
+            scale,
+        }
+    }
+
+    /// `m`'s row, into `row` (6 + parameters long).
+    pub(super) fn fill(&self, m: &Match, row: &mut DVector<f64>) {
+        row.fill(0.0);
+        let lever = (m.surface.coords - self.centre).cross(&m.normal) / self.scale;
+        for axis in 0..3 {
+            row[axis] = lever[axis];
+            row[3 + axis] = m.normal[axis];
+        }
+        for &joint in &self.joints_above[m.link] {
+            if let Some((frame, parameter, multiplier)) = self.axes[joint] {
+                row[6 + parameter] += multiplier
+                    * if frame.prismatic {
+                        frame.axis.dot(&m.normal)
+                    } else {
+                        frame.axis.dot(&(m.surface - frame.origin).cross(&m.normal)) / self.scale
+                    };
+            }
+        }
     }
 }
 

@@ -27,6 +27,10 @@ pub struct JointFit {
     /// joint's value, not each. The links are placed right either way; the split between base
     /// yaw and joint value is the start's (a controller's joint reading settles it).
     pub turns_with_base: bool,
+    /// Half the 95 % interval of `value` the final matches imply, rad (m for a prismatic
+    /// joint): `None` when not observed, when it turns with the base, or when the scan fixes it
+    /// only together with another joint (see `fit::uncertainty`).
+    pub within_95: Option<f64>,
 }
 
 /// Another pose of the robot the fit also tried, nearly as good: a wrist a half turn round with
