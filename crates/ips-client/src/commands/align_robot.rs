@@ -248,3 +248,52 @@ impl AlignRobotOutput {
         text
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{AlignRobotOutput, BasePoseJson, JointJson};
+
+    fn joint(name: &str, within_95: Option<f64>, prismatic: bool, observed: bool) -> JointJson {
+        JointJson {
+            name: name.to_owned(),
+            value: 0.5,
+            observed,
+            turns_with_base: false,
+            within_95,
+            prismatic,
+        }
+    }
+
+    #[test]
+    fn the_text_gives_a_turns_interval_in_mrad_a_slides_in_mm_and_none_where_there_is_none() {
+        let output = AlignRobotOutput {
+            base_pose: BasePoseJson {
+                xyz: [0.0; 3],
+                rpy: [0.0; 3],
+            },
+            q: vec![0.5; 3],
+            links: Vec::new(),
+            joints: vec![
+                joint("elbow", Some(0.000_25), false, true),
+                joint("carriage", Some(0.000_4), true, true),
+                joint("flange", None, false, false),
+            ],
+            rms: 0.0004,
+            iterations: 10,
+            cloud_points: 1000,
+            time_s: 0.05,
+            ambiguous: false,
+            twin: None,
+        };
+        let text = output.to_text();
+        let line = |name: &str| text.lines().find(|l| l.contains(name)).unwrap_or_default();
+        assert!(line("elbow").contains("+-0.250 mrad (95 %)"), "{text}");
+        assert!(line("carriage").contains("+-0.400 mm (95 %)"), "{text}");
+        assert!(!line("flange").contains("+-"), "{text}");
+        assert!(line("flange").contains("not observed"), "{text}");
+        // The unit is the text's alone: the JSON gives metres or radians and no flag.
+        let json = serde_json::to_value(&output).unwrap_or_default();
+        assert!(json["joints"][1].get("prismatic").is_none(), "{json}");
+        assert_eq!(json["joints"][1]["within_95"], 0.0004);
+    }
+}
