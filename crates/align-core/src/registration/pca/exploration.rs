@@ -161,7 +161,7 @@ pub(super) fn detected_starts(
 
 /// The runs of [`explore`] from `start` turned by up to `max_angle` (rad), each from a band of
 /// `delta0_m`.
-pub(super) fn explore_turns(
+fn explore_turns(
     mesh: &Mesh,
     coarse: &Coarse,
     start: &Isometry3<f64>,
@@ -243,6 +243,54 @@ pub(super) fn explore_turns(
         .collect();
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     (scored, candidates.len() - usize::from(exploring.from_start))
+}
+
+/// Runs from the found `pose` turned every way the delta allows, ends best first: a twin (a
+/// symmetric part's other pose) that no run from the start reached shows up among them, and so
+/// does a better pose the exploration from the start missed. A twin turned about the part's
+/// centre fills nearly the same space: a band of half the part's radius keeps the clutter out.
+///
+/// With no turn of the spread set within the delta's reach, these are two runs from the found
+/// pose itself (9-14 ms of a large part's 50 mm alignment, a probe): they were left out in a
+/// trial and a Z1 link at 100 mm ended 49 mm off instead of 0.2 mm (the run from the found
+/// pose in the delta's band had carried it to the truth), and a Solo12 shin at 50 mm lost its
+/// ambiguity flag (docs/cad-scan-trials.md, forty-first session).
+pub(super) fn runs_around(
+    mesh: &Mesh,
+    coarse: &Coarse,
+    pose: &Isometry3<f64>,
+    delta0_m: f64,
+    options: &PcaOptions,
+) -> Vec<(f64, Isometry3<f64>)> {
+    let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
+    let band = delta0_m.min(0.5 * mesh.radius_m());
+    // Exact: with the slack these runs found the twin of a symmetric box in no start
+    // (crates/align-core/tests/pca.rs, before answers near the surface were made exact), and
+    // their band is narrow, so cheap anyway. Run with the large planes and without: with the
+    // floor's points a symmetric box's runs reached its half-turn twin, which rests on the
+    // floor as well (crates/align-core/tests/pca.rs), and without them none did; with them
+    // only, one of three cylinder scans was reported unique (crates/cad-scans/tests/
+    // refusals.rs).
+    let around_with = |runs_keep_planes: bool| {
+        let exploring = Exploring {
+            runs_keep_planes,
+            ..Exploring::EXACT
+        };
+        explore_turns(mesh, coarse, pose, max_angle, band, options, exploring).0
+    };
+    // Both sets at once: a part with no turn in the delta's reach runs one run a set, which
+    // left a core idle (docs/BENCHMARKS.md, thirty-ninth session).
+    let mut around = match (options.without_large_planes, options.parallel) {
+        (true, true) => {
+            let (mut with, without) = rayon::join(|| around_with(true), || around_with(false));
+            with.extend(without);
+            with
+        }
+        (true, false) => [around_with(true), around_with(false)].concat(),
+        (false, _) => around_with(true),
+    };
+    around.sort_by(|a, b| b.0.total_cmp(&a.0));
+    around
 }
 
 /// The small turns (see [`Exploring::small_turns`]) are this fraction of the delta's reach.

@@ -36,7 +36,7 @@ pub(crate) mod uncertainty;
 pub use self::consensus::scan_consensus;
 use self::consensus::{Coarse, consensus, score_noise};
 use self::exploration::{
-    EXPLORATION_SLACK, Exploring, detected_starts, explore, explore_turns, is_wide, uniqueness,
+    EXPLORATION_SLACK, Exploring, detected_starts, explore, is_wide, runs_around, uniqueness,
 };
 pub use self::exploration::{pose_candidates, pose_candidates_spread};
 use self::hop::{HopStarts, hop, hop_from_the_end};
@@ -672,38 +672,8 @@ fn locate(
     }
     let mut uniqueness_found = None;
     if let Some(coarse) = coarse.as_ref().filter(|_| options.twin_search) {
-        // Runs from the found pose turned every way the delta allows: a twin (a symmetric part's
-        // other pose) that no run from the start reached shows up here, and so does a better
-        // pose the exploration from the start missed. A twin turned about the part's centre
-        // fills nearly the same space: a band of half the part's radius keeps the clutter out.
-        let max_angle = (1.2 * delta0_m / mesh.radius_m()).min(std::f64::consts::PI);
-        let band = delta0_m.min(0.5 * mesh.radius_m());
-        // Exact: with the slack these runs found the twin of a symmetric box in no start
-        // (crates/align-core/tests/pca.rs, before answers near the surface were made exact),
-        // and their band is narrow, so cheap anyway. Run with the large planes and without:
-        // with the floor's points a symmetric box's runs reached its half-turn twin, which
-        // rests on the floor as well (crates/align-core/tests/pca.rs), and without them none
-        // did; with them only, one of three cylinder scans was reported unique
-        // (crates/cad-scans/tests/refusals.rs).
-        let around_with = |runs_keep_planes: bool| {
-            let exploring = Exploring {
-                runs_keep_planes,
-                ..Exploring::EXACT
-            };
-            explore_turns(mesh, coarse, &run.pose, max_angle, band, options, exploring).0
-        };
-        // Both sets at once: a part with no turn in the delta's reach runs one run a set, which
-        // left a core idle (docs/BENCHMARKS.md, thirty-ninth session).
-        let mut around = match (options.without_large_planes, options.parallel) {
-            (true, true) => {
-                let (mut with, without) = rayon::join(|| around_with(true), || around_with(false));
-                with.extend(without);
-                with
-            }
-            (true, false) => [around_with(true), around_with(false)].concat(),
-            (false, _) => around_with(true),
-        };
-        around.sort_by(|a, b| b.0.total_cmp(&a.0));
+        // Runs from the found pose turned every way the delta allows (see `runs_around`).
+        let around = runs_around(mesh, coarse, &run.pose, delta0_m, options);
         let found_score = coarse.score(mesh, &run.pose);
         if let Some((better_score, better)) = around.first()
             && *better_score > found_score + score_noise(found_score)
