@@ -184,8 +184,9 @@ fn turn_of(frame: &Isometry3<f64>, point: &Point3<f64>) -> f64 {
 
 /// A folded angle's bins (`bins` over [0, pi/2]) by the cosines of their edges: the pair
 /// features' three angles were three `acos` a pair, and the model's table and the voting make
-/// millions of pairs (a probe, not kept: the model's table alone took 6-100 ms of a 100 mm CAD-scan
-/// alignment, serial). The bin is the same as the angle's except within rounding of an edge.
+/// millions of pairs (a probe, not kept: the model's table alone took 5-95 ms of a 100 mm
+/// CAD-scan alignment, on one core; 39 -> 22 ms mean on set C, docs/BENCHMARKS.md). The bin is
+/// the same as the angle's except within rounding of an edge.
 #[derive(Debug, Clone)]
 struct FoldedAngleBins {
     /// cos(k pi / (2 bins)) for k = 1 .. bins - 1: falling.
