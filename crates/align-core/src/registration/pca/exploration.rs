@@ -254,7 +254,10 @@ fn explore_turns(
 /// pose itself (9-14 ms of a large part's 50 mm alignment, a probe): they were left out in a
 /// trial and a Z1 link at 100 mm ended 49 mm off instead of 0.2 mm (the run from the found
 /// pose in the delta's band had carried it to the truth), and a Solo12 shin at 50 mm lost its
-/// ambiguity flag (docs/cad-scan-trials.md, forty-first session).
+/// ambiguity flag. With the run without the large planes alone, the cylinder of
+/// `crates/cad-scans/tests/refusals.rs` at 50 mm (no turn in reach) was called unique in two of
+/// its three scans: both runs are needed even then (docs/cad-scan-trials.md, forty-first
+/// session).
 pub(super) fn runs_around(
     mesh: &Mesh,
     coarse: &Coarse,
