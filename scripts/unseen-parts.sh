@@ -10,6 +10,8 @@
 # made on the other sets were chosen.
 # Set D, held out until the thirty-seventh session: IIT's Centauro arm (its millimetre meshes
 # written in metres), ODRI's Solo12 leg and base and Bolt body, Unitree's Laikago leg.
+# Set E, held out until the forty-second session: PAL Robotics' TIAGo (the first one: arm, head,
+# torso), ODRI's FingerEdu links and Wonik's Allegro hand (its base and thumb link, 41-114 mm).
 # They come from the PyPI wheel example-robot-data 6.0.0 (the wheel the shipped xArm7 and
 # SO-ARM100 meshes came from) and are written, checked by SHA-256, into one folder per robot
 # under OUT (default target/unseen-parts); nothing is copied into the repository.
@@ -21,12 +23,15 @@
 #   (set B: --mesh-dir OUT/ur5 --mesh-dir OUT/g1 --mesh-dir OUT/cassie --parts ur5_,g1_,cassie_;
 #    set C: --mesh-dir OUT/talos --mesh-dir OUT/pr2 --mesh-dir OUT/go2 --parts talos_,pr2_,go2_;
 #    set D: --mesh-dir OUT/centauro --mesh-dir OUT/solo12 --mesh-dir OUT/bolt
-#           --mesh-dir OUT/laikago --parts centauro_,solo12_,bolt_,laikago_)
+#           --mesh-dir OUT/laikago --parts centauro_,solo12_,bolt_,laikago_;
+#    set E: --mesh-dir OUT/tiago --mesh-dir OUT/finger_edu --mesh-dir OUT/allegro_hand
+#           --parts tiago_,finger_edu_,allegro_hand_ --no-peers)
 #
 # Licenses, as the wheel's README of each description names them (panda_description also
 # carries its LICENSE file): tiago_pro Apache-2.0, z1 MPL-2.0, panda Apache-2.0, ur BSD,
 # g1 BSD-3-Clause, cassie ISC, talos_data Apache-2.0, pr2 BSD, go2 MPL-2.0, centauro Apache-2.0,
-# solo BSD-3-Clause, bolt BSD-3-Clause, laikago MPL-2.0. They are only read here, never shipped.
+# solo BSD-3-Clause, bolt BSD-3-Clause, laikago MPL-2.0, tiago Apache-2.0, finger_edu
+# BSD-3-Clause, allegro_hand BSD. They are only read here, never shipped.
 # Idempotent: files already in place with the right hash are kept.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -130,6 +135,29 @@ PARTS = [
      "440940425b78ee5c44ecdbea84c514923029f2021adcba255dd8074d85719cc6"),
     ("laikago_description/meshes/hip.obj", "laikago/hip.obj",
      "bf6aef44be84ee64558ee29a3f19450efd8a6a2f65f93d873f6bfc633fcc0b42"),
+    # Set E, held out: first scanned in the forty-second session, to check the change that
+    # session chose on sets A-D (the fine second look's contenders).
+    ("tiago_description/meshes/arm/arm_1.stl", "tiago/arm_1.stl",
+     "a98a1becdaa0f17182ae242cbf829c327a108f11bb7dbdf1554ec76d7364c599"),
+    ("tiago_description/meshes/arm/arm_2.stl", "tiago/arm_2.stl",
+     "df8df6ed235678f8e0b48f99024cb5cd9cea83c0ca6963275fe704f07433f508"),
+    ("tiago_description/meshes/arm/arm_3.stl", "tiago/arm_3.stl",
+     "7894bc60a7c2b68cdeaa991e9ad03f48abcb5e72f8ffb5a50b1f4edadfb417e9"),
+    ("tiago_description/meshes/head/head_2.stl", "tiago/head_2.stl",
+     "8cc0b5fc791d313670f5d857cc83df415de6435a7c83d407b112dc6334a33158"),
+    ("tiago_description/meshes/torso/torso_lift_without_arm.stl",
+     "tiago/torso_lift_without_arm.stl",
+     "5abbfad42f064647355ab0246178912e48d800b93ab495584896a1456ccff7e9"),
+    ("finger_edu_description/meshes/upper_link.stl", "finger_edu/upper_link.stl",
+     "e9979cb210c727b2bb11e303734dd6ba9aa41c19752bdf665754ac2bf50dcae9"),
+    ("finger_edu_description/meshes/middle_link.stl", "finger_edu/middle_link.stl",
+     "313e6eaede4524245bbd26fafaa5dc165a9a9958a8a5136ea057d1afd5844b87"),
+    ("finger_edu_description/meshes/lower_link.stl", "finger_edu/lower_link.stl",
+     "a96d1d93473af29a893bef7424b1a27a33d5183edbabbe13f22b77b2164fd106"),
+    ("allegro_hand_description/meshes/base_link.STL", "allegro_hand/base_link.stl",
+     "4060e1ae52bca21367e15a1dfab16bc7c2e81849566631b7f55e2cf376b7bc85"),
+    ("allegro_hand_description/meshes/link_12.0_right.STL", "allegro_hand/link_12_right.stl",
+     "c5418fc127311eefee1d8ee69dfcfde2157d038286900bee91608d2701b00f13"),
 ]
 
 
@@ -169,5 +197,6 @@ with zipfile.ZipFile(wheel) as archive:
             f.write(data)
 print(f"unseen-parts: {len(PARTS)} meshes; set A in {out}/tiago_pro, {out}/z1, {out}/panda;"
       f" set B in {out}/ur5, {out}/g1, {out}/cassie; set C in {out}/talos, {out}/pr2, {out}/go2;"
-      f" set D in {out}/centauro, {out}/solo12, {out}/bolt, {out}/laikago")
+      f" set D in {out}/centauro, {out}/solo12, {out}/bolt, {out}/laikago;"
+      f" set E in {out}/tiago, {out}/finger_edu, {out}/allegro_hand")
 EOF

@@ -21,8 +21,21 @@ use super::schedule::{RunSlack, ScheduleRun, run_schedule_on_levels};
 use crate::geometry::Mesh;
 
 /// At most this many of the exploration's ends besides the found pose are run down and counted
-/// again: those within the coarse score's noise of the best, best first, one per pose.
-const CONTENDERS: usize = 3;
+/// again: those within [`CONTENDER_NOISES`] of the coarse score's noise of the best, best
+/// first, one per pose.
+///
+/// The coarse score ranks the true pose below a wrong one by more than its noise on small parts
+/// in clutter: of the 96 misses the held-out sets A-D reported ambiguous at 200-1000 mm, 24 had
+/// the truth among the exploration's ends (a probe, not kept), scoring up to 44 below the pose
+/// chosen (335 against 291 on a UR5 shoulder) and ranked up to 35th among ends that are often
+/// the same few poses. With three contenders within one noise (before the forty-second session)
+/// they stayed misses; six within two fit 7 more of the 800 scenes of sets A-D and 8 more of
+/// the 200 of set E (scanned after this was chosen), losing none (docs/cad-scan-trials.md).
+const CONTENDERS: usize = 6;
+
+/// How many of the coarse score's noises (see [`score_noise`]) below the best an end may score
+/// and still be a contender.
+const CONTENDER_NOISES: f64 = 2.0;
 
 /// What the coarse score left undecided: the found pose's run (polished), the coarse score it is
 /// measured against (the higher of its own and its runner-up's), and the exploration's ends
@@ -33,10 +46,10 @@ pub(super) struct Undecided<'a> {
     pub(super) ends: &'a [(f64, Isometry3<f64>)],
 }
 
-/// The found pose against the exploration's ends that score within the coarse noise of it (at
-/// most [`CONTENDERS`], one per pose), each run down from `band0_m` on the fine `keypoints` and
-/// polished (when the options polish, as the found pose was), all counted on the fine keypoints off the large planes in the narrowest of their
-/// polishes' bands: the contender's run when it explains more than the found pose by more than
+/// The found pose against the exploration's ends that score within [`CONTENDER_NOISES`] of the
+/// coarse noise of it (at most [`CONTENDERS`], one per pose), each run down from `band0_m` on the
+/// fine `keypoints` and polished (when the options polish, as the found pose was), all counted
+/// on the fine keypoints off the large planes in the narrowest of their polishes' bands: the contender's run when it explains more than the found pose by more than
 /// the count's noise; `None` when the found pose stays.
 pub(super) fn decide_finely(
     mesh: &Mesh,
@@ -52,7 +65,7 @@ pub(super) fn decide_finely(
         ends,
     } = undecided;
     let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| same_pose(mesh, a, b);
-    let bar = found_score - score_noise(found_score);
+    let bar = found_score - CONTENDER_NOISES * score_noise(found_score);
     let mut ranked = ends.to_vec();
     ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
     let mut starts: Vec<Isometry3<f64>> = Vec::new();
@@ -153,6 +166,16 @@ mod tests {
         found: Isometry3<f64>,
         contender: Isometry3<f64>,
     ) -> Option<ScheduleRun> {
+        decide_scored(mesh, truth, found, (100.0, contender))
+    }
+
+    /// As [`decide`], the found pose's coarse score 100 and the contender's given.
+    fn decide_scored(
+        mesh: &Mesh,
+        truth: &Isometry3<f64>,
+        found: Isometry3<f64>,
+        contender: (f64, Isometry3<f64>),
+    ) -> Option<ScheduleRun> {
         let (keypoints, coarse) = scene(mesh, truth);
         decide_finely(
             mesh,
@@ -161,7 +184,7 @@ mod tests {
             Undecided {
                 run: &found_at(found),
                 score: 100.0,
-                ends: &[(100.0, contender), (10.0, *truth)],
+                ends: &[contender, (10.0, *truth)],
             },
             0.03,
             &PcaOptions::default(),
@@ -185,6 +208,24 @@ mod tests {
         assert!(off_m < 5e-4, "{off_m} m off the truth");
         // The other way round the found pose stays.
         assert!(decide(&mesh, &truth, truth, slid).is_none());
+    }
+
+    #[test]
+    fn a_contender_beyond_the_coarse_noise_but_within_twice_it_is_run_down_too() {
+        let mesh = step_block().unwrap().mesh;
+        let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
+        let slid = Isometry3::translation(0.08, 0.0, 0.0) * truth;
+        let near_truth = Isometry3::from_parts(
+            Translation3::new(0.002, -0.001, 0.001),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.01),
+        ) * truth;
+        // The found pose scores 100, whose noise is 20: a contender at 70 is within twice it
+        // (the coarse score ranked the true pose of the held-out sets' misses up to 44 below a
+        // wrong one, docs/cad-scan-trials.md), one at 55 is not.
+        let decided = decide_scored(&mesh, &truth, slid, (70.0, near_truth)).unwrap();
+        let off_m = pose_distance(&decided.pose, &truth, mesh.radius_m());
+        assert!(off_m < 5e-4, "{off_m} m off the truth");
+        assert!(decide_scored(&mesh, &truth, slid, (55.0, near_truth)).is_none());
     }
 
     #[test]
