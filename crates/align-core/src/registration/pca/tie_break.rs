@@ -25,7 +25,7 @@ use crate::geometry::Mesh;
 /// first, one per pose.
 ///
 /// The coarse score ranks the true pose below a wrong one by more than its noise on small parts
-/// in clutter: of the 96 misses the held-out sets A-D reported ambiguous at 200-1000 mm, 24 had
+/// in clutter: of the 96 misses the unseen sets A-D reported ambiguous at 200-1000 mm, 24 had
 /// the truth among the exploration's ends (a probe, not kept), scoring up to 44 below the pose
 /// chosen (335 against 291 on a UR5 shoulder) and ranked up to 35th among ends that are often
 /// the same few poses. With three contenders within one noise (before the forty-second session)
@@ -49,8 +49,9 @@ pub(super) struct Undecided<'a> {
 /// The found pose against the exploration's ends that score within [`CONTENDER_NOISES`] of the
 /// coarse noise of it (at most [`CONTENDERS`], one per pose), each run down from `band0_m` on the
 /// fine `keypoints` and polished (when the options polish, as the found pose was), all counted
-/// on the fine keypoints off the large planes in the narrowest of their polishes' bands: the contender's run when it explains more than the found pose by more than
-/// the count's noise; `None` when the found pose stays.
+/// on the fine keypoints off the large planes in the narrowest of their polishes' bands: the
+/// contender's run when it explains more than the found pose by more than the count's noise;
+/// `None` when the found pose stays.
 pub(super) fn decide_finely(
     mesh: &Mesh,
     coarse: &Coarse,
