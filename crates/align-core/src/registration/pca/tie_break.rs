@@ -192,18 +192,25 @@ mod tests {
         )
     }
 
-    #[test]
-    fn a_pose_slid_off_the_part_gives_way_to_the_contender_that_fits_it() {
+    /// The step block on the floor (mesh, truth), the block slid 80 mm along the floor (a found
+    /// pose) and the truth 2 mm and 0.01 rad off, as a short run on coarse keypoints ends (a
+    /// contender).
+    fn slid_block() -> (Mesh, Isometry3<f64>, Isometry3<f64>, Isometry3<f64>) {
         let mesh = step_block().unwrap().mesh;
         let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
-        // Found: the block slid 80 mm along the floor. Contender: the truth 2 mm and 0.01 rad
-        // off, as a short run on coarse keypoints ends. The truth itself scores too low to be
-        // a contender: only what the search reached is compared.
         let slid = Isometry3::translation(0.08, 0.0, 0.0) * truth;
         let near_truth = Isometry3::from_parts(
             Translation3::new(0.002, -0.001, 0.001),
             UnitQuaternion::from_euler_angles(0.0, 0.0, 0.01),
         ) * truth;
+        (mesh, truth, slid, near_truth)
+    }
+
+    #[test]
+    fn a_pose_slid_off_the_part_gives_way_to_the_contender_that_fits_it() {
+        // The truth itself scores too low to be a contender: only what the search reached is
+        // compared.
+        let (mesh, truth, slid, near_truth) = slid_block();
         let decided = decide(&mesh, &truth, slid, near_truth).unwrap();
         let off_m = pose_distance(&decided.pose, &truth, mesh.radius_m());
         assert!(off_m < 5e-4, "{off_m} m off the truth");
@@ -213,15 +220,9 @@ mod tests {
 
     #[test]
     fn a_contender_beyond_the_coarse_noise_but_within_twice_it_is_run_down_too() {
-        let mesh = step_block().unwrap().mesh;
-        let truth = Isometry3::new(Vector3::new(0.7, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.5));
-        let slid = Isometry3::translation(0.08, 0.0, 0.0) * truth;
-        let near_truth = Isometry3::from_parts(
-            Translation3::new(0.002, -0.001, 0.001),
-            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.01),
-        ) * truth;
+        let (mesh, truth, slid, near_truth) = slid_block();
         // The found pose scores 100, whose noise is 20: a contender at 70 is within twice it
-        // (the coarse score ranked the true pose of the held-out sets' misses up to 44 below a
+        // (the coarse score ranked the true pose of the unseen sets' misses up to 44 below a
         // wrong one, docs/cad-scan-trials.md), one at 55 is not.
         let decided = decide_scored(&mesh, &truth, slid, (70.0, near_truth)).unwrap();
         let off_m = pose_distance(&decided.pose, &truth, mesh.radius_m());
