@@ -147,7 +147,7 @@ pub(super) fn detected_starts(
         .par_iter()
         .map(|found| {
             let pose = found.world_from_model;
-            (consensus(mesh, coarse.scored(), &pose, band_m), pose)
+            (coarse.score_in_band(mesh, &pose, band_m), pose)
         })
         .collect();
     // Stable: poses that score alike keep their vote order.

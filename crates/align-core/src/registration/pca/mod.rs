@@ -202,6 +202,11 @@ pub struct PcaOptions {
     /// start by half the reach each way about the part's three axes (six more runs). Off by
     /// default: the second look turns it on.
     pub small_turns: bool,
+    /// The exploration's score counts a coarse keypoint on the part's surface only where the
+    /// scan's normal there agrees with the surface's (default; see `consensus`): the floor and
+    /// a box crossing a wrong pose's surface count for it no more. Off: every keypoint within
+    /// the band counts, as the robot fit's rigid stages were measured.
+    pub oriented_score: bool,
 }
 
 impl Default for PcaOptions {
@@ -244,6 +249,7 @@ impl Default for PcaOptions {
             hop_near_misses: true,
             look_again_when_unfit: true,
             small_turns: false,
+            oriented_score: true,
         }
     }
 }

@@ -121,6 +121,8 @@ impl Default for RobotFitOptions {
                 local_candidate: false,
                 // The robot trials were measured with the cosine schedule (eq. 33).
                 schedule: DeltaSchedule::Cosine,
+                // The robot trials were measured with every keypoint in the band counted.
+                oriented_score: false,
                 ..PcaOptions::default()
             },
             // The proximal links are small: 15 mm keypoints (45 mm for the exploration's and the
@@ -134,6 +136,8 @@ impl Default for RobotFitOptions {
                 window: 19,
                 without_large_planes: false,
                 schedule: DeltaSchedule::Cosine,
+                // The robot trials were measured with every keypoint in the band counted.
+                oriented_score: false,
                 ..PcaOptions::default()
             },
             // Every reference's vote is merged: the true base of a cluttered scan is a pose many
