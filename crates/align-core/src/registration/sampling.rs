@@ -240,46 +240,40 @@ const NORMAL_MIN_POINTS: usize = 6;
 /// of the least spread says nothing about either face.
 const FLAT_ENOUGH: f64 = 0.2;
 
-/// [`voxel_representatives`] (the same points, in the same order) with the unit normal of the
-/// scan's surface at each: the direction of least spread of the cloud's points within one voxel
-/// of it, or `None` where they are too few or do not lie on one surface (see [`FLAT_ENOUGH`]).
-/// A scan has no reliable sign for its normals, so neither has this.
-pub fn voxel_representatives_with_normals(
+/// The unit normal of the surface of `cloud` at each point of `at`: the direction of least
+/// spread of the cloud's points within `radius_m` of it, or `None` where they are too few or do
+/// not lie on one surface (see [`FLAT_ENOUGH`]). A scan has no reliable sign for its normals, so
+/// neither has this. The cloud is binned once, in cubes of `radius_m`; each point looks in the
+/// 27 about its own.
+pub fn surface_normals_at(
     cloud: &[Point3<f64>],
-    voxel_m: f64,
-) -> (Vec<Point3<f64>>, Vec<Option<Vector3<f64>>>) {
+    at: &[Point3<f64>],
+    radius_m: f64,
+) -> Vec<Option<Vector3<f64>>> {
     use rayon::prelude::*;
     use std::collections::HashMap;
-    if !(voxel_m > 0.0 && voxel_m.is_finite()) {
-        return (cloud.to_vec(), vec![None; cloud.len()]);
+    if !(radius_m > 0.0 && radius_m.is_finite()) || cloud.is_empty() {
+        return vec![None; at.len()];
     }
-    let bins = Bins::new(cloud, voxel_m);
+    let bins = Bins::new(cloud, radius_m);
     let groups: Vec<&[usize]> = bins.groups().collect();
     let group_of: HashMap<VoxelKey, usize, KeyHashing> = groups
         .iter()
         .enumerate()
-        .map(|(index, members)| (voxel_of(&cloud[members[0]], voxel_m), index))
+        .map(|(index, members)| (voxel_of(&cloud[members[0]], radius_m), index))
         .collect();
-    let points: Vec<Point3<f64>> = groups
-        .par_iter()
-        .map(|members| representative(cloud, members))
-        .collect();
-    let normals = points
-        .par_iter()
+    at.par_iter()
         .map(|point| {
-            // The ball of one voxel about a point of its voxel lies within the 27 voxels
-            // about it.
-            let (x, y, z) = voxel_of(point, voxel_m);
+            let (x, y, z) = voxel_of(point, radius_m);
             let neighbours: Vec<Point3<f64>> = (-1..=1)
                 .flat_map(|dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| (dx, dy, dz))))
                 .filter_map(|(dx, dy, dz)| group_of.get(&(x + dx, y + dy, z + dz)))
                 .flat_map(|&group| groups[group].iter().map(|&i| cloud[i]))
-                .filter(|p| (p - point).norm_squared() <= voxel_m * voxel_m)
+                .filter(|p| (p - point).norm_squared() <= radius_m * radius_m)
                 .collect();
             surface_normal(&neighbours)
         })
-        .collect();
-    (points, normals)
+        .collect()
 }
 
 /// The unit normal of the surface `points` lie on (see [`FLAT_ENOUGH`]), if they lie on one.
@@ -515,11 +509,11 @@ mod tests {
     }
 
     #[test]
-    fn a_tilted_planes_keypoints_carry_its_normal_and_a_ridges_carry_none() {
+    fn a_tilted_planes_points_carry_its_normal_and_a_ridges_carry_none() {
+        let at = |cloud: &[Point3<f64>]| voxel_representatives(cloud, 0.015);
         // A plane rising 1 in 2 along x: its normal is (-1, 0, 2) / sqrt(5).
         let slope = grid(0.1, 0.003, |x, _| 0.5 * x + 0.3);
-        let (points, normals) = voxel_representatives_with_normals(&slope, 0.015);
-        assert_eq!(points, voxel_representatives(&slope, 0.015));
+        let normals = surface_normals_at(&slope, &at(&slope), 0.015);
         let expected = Vector3::new(-1.0, 0.0, 2.0).normalize();
         assert!(
             normals
@@ -527,9 +521,10 @@ mod tests {
                 .all(|n| n.is_some_and(|n| n.dot(&expected).abs() > 0.999))
         );
         // A ridge: two faces meeting at a right angle along x = 0. On the ridge the points do
-        // not lie on one surface; a voxel away from it they do.
+        // not lie on one surface; a ball's width away from it they do.
         let ridge = grid(0.1, 0.003, |x, _| -x.abs());
-        let (points, normals) = voxel_representatives_with_normals(&ridge, 0.015);
+        let points = at(&ridge);
+        let normals = surface_normals_at(&ridge, &points, 0.015);
         for (point, normal) in points.iter().zip(&normals) {
             if point.x.abs() < 0.002 {
                 assert!(normal.is_none(), "a normal on the ridge at {point}");
@@ -542,10 +537,10 @@ mod tests {
                 );
             }
         }
-        // Too few points for a surface.
+        // Too few points for a surface, and no cloud at all.
         let sparse = [Point3::origin(), Point3::new(0.001, 0.0, 0.0)];
-        let (_, normals) = voxel_representatives_with_normals(&sparse, 0.015);
-        assert_eq!(normals, vec![None]);
+        assert_eq!(surface_normals_at(&sparse, &sparse[..1], 0.015), vec![None]);
+        assert_eq!(surface_normals_at(&[], &sparse[..1], 0.015), vec![None]);
     }
 
     #[test]
