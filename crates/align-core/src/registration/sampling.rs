@@ -234,10 +234,10 @@ fn representative(cloud: &[Point3<f64>], members: &[usize]) -> Point3<f64> {
 const NORMAL_MIN_POINTS: usize = 6;
 
 /// A neighbourhood is a surface with a normal while its scatter's least eigenvalue is at most
-/// this fraction of the middle one. A flat patch a voxel wide scanned with 0.5 mm noise gives
-/// about 0.005, one bent round a 10 mm link about 0.1; where two faces meet at an edge, or a
-/// mixed pixel's streak crosses the patch, the fraction is a third and more, and the direction
-/// of the least spread says nothing about either face.
+/// this fraction of the middle one. Within 15 mm, sampled every 3 mm (computed for these
+/// shapes): a flat patch with 0.5 mm noise gives 0.003, the seen half of a rod of 20 mm radius
+/// 0.04 and of 10 mm 0.18; two faces meeting at a right angle 0.31, where the direction of
+/// least spread says nothing about either face.
 const FLAT_ENOUGH: f64 = 0.2;
 
 /// The unit normal of the surface of `cloud` at each point of `at`: the direction of least
