@@ -17,7 +17,7 @@ use std::collections::HashMap;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-use super::sampling::voxel_representatives;
+use super::sampling::{CellIndex, cell_of, voxel_representatives};
 use crate::geometry::{Mesh, plane_through};
 
 #[derive(Debug, Clone, PartialEq)]
@@ -57,14 +57,6 @@ struct Oriented {
     normal: Vector3<f64>,
 }
 
-fn cell_of(point: &Point3<f64>, cell_m: f64) -> [i64; 3] {
-    [
-        (point.x / cell_m).floor() as i64,
-        (point.y / cell_m).floor() as i64,
-        (point.z / cell_m).floor() as i64,
-    ]
-}
-
 /// Points on the mesh's triangles, one per `step_m` voxel, with their triangle's normal.
 fn mesh_samples(mesh: &Mesh, step_m: f64) -> Vec<Oriented> {
     let vertices: Vec<Point3<f64>> = mesh.vertices().collect();
@@ -88,38 +80,6 @@ fn mesh_samples(mesh: &Mesh, step_m: f64) -> Vec<Oriented> {
     let mut samples: Vec<([i64; 3], Oriented)> = cells.into_iter().collect();
     samples.sort_by_key(|(cell, _)| *cell);
     samples.into_iter().map(|(_, sample)| sample).collect()
-}
-
-/// Points in a hash of cubic cells, for neighbourhood queries.
-struct CellIndex {
-    cell_m: f64,
-    cells: HashMap<[i64; 3], Vec<usize>>,
-}
-
-impl CellIndex {
-    fn new(points: &[Point3<f64>], cell_m: f64) -> Self {
-        let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
-        for (index, point) in points.iter().enumerate() {
-            cells.entry(cell_of(point, cell_m)).or_default().push(index);
-        }
-        Self { cell_m, cells }
-    }
-
-    /// Indices of `points` within `radius_m` (at most the cell size) of `centre`.
-    fn within<'a>(
-        &'a self,
-        points: &'a [Point3<f64>],
-        centre: &'a Point3<f64>,
-        radius_m: f64,
-    ) -> impl Iterator<Item = usize> + 'a {
-        let [x, y, z] = cell_of(centre, self.cell_m);
-        (-1..=1)
-            .flat_map(move |dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| (dx, dy, dz))))
-            .filter_map(move |(dx, dy, dz)| self.cells.get(&[x + dx, y + dy, z + dz]))
-            .flatten()
-            .copied()
-            .filter(move |&i| (points[i] - centre).norm_squared() <= radius_m * radius_m)
-    }
 }
 
 /// One point per `step_m` voxel of the scan with the normal of its neighbourhood's plane;

@@ -3,8 +3,12 @@
 //! either the centroid of its points or the cloud point nearest that centroid. Output is ordered
 //! by voxel, so it is deterministic.
 
+use std::collections::HashMap;
+
 use nalgebra::{Point3, Vector3};
 use rayon::slice::ParallelSliceMut;
+
+use crate::geometry::PrincipalSpread;
 
 type VoxelKey = (i64, i64, i64);
 
@@ -230,6 +234,47 @@ fn representative(cloud: &[Point3<f64>], members: &[usize]) -> Point3<f64> {
         .unwrap_or(centre)
 }
 
+/// Points in a hash of cubic cells, for neighbourhood queries.
+pub(crate) struct CellIndex {
+    cell_m: f64,
+    cells: HashMap<[i64; 3], Vec<usize>>,
+}
+
+/// The cubic cell of edge `cell_m` that `point` lies in.
+pub(crate) fn cell_of(point: &Point3<f64>, cell_m: f64) -> [i64; 3] {
+    [
+        (point.x / cell_m).floor() as i64,
+        (point.y / cell_m).floor() as i64,
+        (point.z / cell_m).floor() as i64,
+    ]
+}
+
+impl CellIndex {
+    pub(crate) fn new(points: &[Point3<f64>], cell_m: f64) -> Self {
+        let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (index, point) in points.iter().enumerate() {
+            cells.entry(cell_of(point, cell_m)).or_default().push(index);
+        }
+        Self { cell_m, cells }
+    }
+
+    /// Indices of `points` within `radius_m` (at most the cell size) of `centre`.
+    pub(crate) fn within<'a>(
+        &'a self,
+        points: &'a [Point3<f64>],
+        centre: &'a Point3<f64>,
+        radius_m: f64,
+    ) -> impl Iterator<Item = usize> + 'a {
+        let [x, y, z] = cell_of(centre, self.cell_m);
+        (-1..=1)
+            .flat_map(move |dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| (dx, dy, dz))))
+            .filter_map(move |(dx, dy, dz)| self.cells.get(&[x + dx, y + dy, z + dz]))
+            .flatten()
+            .copied()
+            .filter(move |&i| (points[i] - centre).norm_squared() <= radius_m * radius_m)
+    }
+}
+
 /// Fewest cloud points a surface normal is estimated from.
 const NORMAL_MIN_POINTS: usize = 6;
 
@@ -243,33 +288,22 @@ const FLAT_ENOUGH: f64 = 0.2;
 /// The unit normal of the surface of `cloud` at each point of `at`: the direction of least
 /// spread of the cloud's points within `radius_m` of it, or `None` where they are too few or do
 /// not lie on one surface (see [`FLAT_ENOUGH`]). A scan has no reliable sign for its normals, so
-/// neither has this. The cloud is binned once, in cubes of `radius_m`; each point looks in the
-/// 27 about its own.
+/// neither has this.
 pub fn surface_normals_at(
     cloud: &[Point3<f64>],
     at: &[Point3<f64>],
     radius_m: f64,
 ) -> Vec<Option<Vector3<f64>>> {
     use rayon::prelude::*;
-    use std::collections::HashMap;
     if !(radius_m > 0.0 && radius_m.is_finite()) || cloud.is_empty() {
         return vec![None; at.len()];
     }
-    let bins = Bins::new(cloud, radius_m);
-    let groups: Vec<&[usize]> = bins.groups().collect();
-    let group_of: HashMap<VoxelKey, usize, KeyHashing> = groups
-        .iter()
-        .enumerate()
-        .map(|(index, members)| (voxel_of(&cloud[members[0]], radius_m), index))
-        .collect();
+    let index = CellIndex::new(cloud, radius_m);
     at.par_iter()
         .map(|point| {
-            let (x, y, z) = voxel_of(point, radius_m);
-            let neighbours: Vec<Point3<f64>> = (-1..=1)
-                .flat_map(|dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| (dx, dy, dz))))
-                .filter_map(|(dx, dy, dz)| group_of.get(&(x + dx, y + dy, z + dz)))
-                .flat_map(|&group| groups[group].iter().map(|&i| cloud[i]))
-                .filter(|p| (p - point).norm_squared() <= radius_m * radius_m)
+            let neighbours: Vec<Point3<f64>> = index
+                .within(cloud, point, radius_m)
+                .map(|i| cloud[i])
                 .collect();
             surface_normal(&neighbours)
         })
@@ -281,21 +315,9 @@ fn surface_normal(points: &[Point3<f64>]) -> Option<Vector3<f64>> {
     if points.len() < NORMAL_MIN_POINTS {
         return None;
     }
-    // About the first point, so that metres of offset do not swamp millimetres of spread.
-    let origin = points[0];
-    let mean = points
-        .iter()
-        .fold(Vector3::zeros(), |sum, p| sum + (p - origin))
-        / points.len() as f64;
-    let scatter = points.iter().fold(nalgebra::Matrix3::zeros(), |sum, p| {
-        let d = (p - origin) - mean;
-        sum + d * d.transpose()
-    });
-    let eigen = scatter.symmetric_eigen();
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
-    let (least, middle) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
-    let normal = eigen.eigenvectors.column(order[0]).normalize();
+    let spread = PrincipalSpread::of(points.iter().copied())?;
+    let [_, middle, least] = spread.sigma_m.map(|sigma| sigma * sigma);
+    let normal = spread.axes[2];
     (middle > 0.0 && least <= FLAT_ENOUGH * middle && normal.iter().all(|c| c.is_finite()))
         .then_some(normal)
 }
