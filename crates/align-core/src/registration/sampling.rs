@@ -279,10 +279,10 @@ impl CellIndex {
 const NORMAL_MIN_POINTS: usize = 6;
 
 /// A neighbourhood is a surface with a normal while its scatter's least eigenvalue is at most
-/// this fraction of the middle one. Within 15 mm, sampled every 3 mm (computed for these
-/// shapes): a flat patch with 0.5 mm noise gives 0.003, the seen half of a rod of 20 mm radius
-/// 0.04 and of 10 mm 0.18; two faces meeting at a right angle 0.31, where the direction of
-/// least spread says nothing about either face.
+/// this fraction of the middle one. A flat patch with a scanner's noise gives nearly none, a
+/// patch bent round a thin rod more, the thinner the rod; where two faces meet at a right angle
+/// (the ridge in the tests below) the fraction is above this bar, and the direction of least
+/// spread there says nothing about either face.
 const FLAT_ENOUGH: f64 = 0.2;
 
 /// The unit normal of the surface of `cloud` at each point of `at`: the direction of least
