@@ -37,6 +37,8 @@ pub(super) struct Coarse {
     /// The planes left out of `without_planes` (a point on each and its unit normal; empty when
     /// the options keep them).
     planes: Vec<(Point3<f64>, Vector3<f64>)>,
+    /// The cloud's points off `planes`; `None` when there are none.
+    cloud_off_planes: Option<Vec<Point3<f64>>>,
     band_m: f64,
 }
 
@@ -55,15 +57,10 @@ impl Coarse {
         // Only the keypoints the score counts, from the points off the planes: the floor is
         // most of a cell's scan, and its normals were 30-130 ms of 20-115k-point scans (a
         // probe, not kept).
+        let cloud_off_planes = (!planes.is_empty()).then(|| off_the_planes(cloud, &planes));
         let scored_normals = if options.oriented_score {
             let scored = without_planes.as_deref().unwrap_or(&all);
-            let off_planes;
-            let surface = if planes.is_empty() {
-                cloud
-            } else {
-                off_planes = off_the_planes(cloud, &planes);
-                &off_planes
-            };
+            let surface = cloud_off_planes.as_deref().unwrap_or(cloud);
             surface_normals_at(surface, scored, voxel_m)
         } else {
             Vec::new()
@@ -73,6 +70,7 @@ impl Coarse {
             without_planes,
             scored_normals,
             planes,
+            cloud_off_planes,
             band_m: (options.voxel_m * 2.0).max(options.delta_min_m * 0.3),
         }
     }
@@ -92,6 +90,11 @@ impl Coarse {
     ) -> bool {
         let than_score = self.score(mesh, than);
         self.score(mesh, pose) < than_score - score_noise(than_score)
+    }
+
+    /// The cloud without the planes the scores leave out; `None` when they leave none out.
+    pub(super) fn cloud_off_planes(&self) -> Option<&[Point3<f64>]> {
+        self.cloud_off_planes.as_deref()
     }
 
     /// `points` without those on the planes the scores leave out.
