@@ -100,11 +100,26 @@ const DETECTION_SCORE_BAND_PER_STEP: f64 = 2.0;
 /// Poses detected in the scan without its large planes, tried besides the [`DETECTED_STARTS`].
 const DETECTED_OFF_PLANES_STARTS: usize = 8;
 
+/// From a delta of this many part radii on, the start may not overlap the part at all, and
+/// the detection also runs without the large planes. Below it, on sets A-E, the second
+/// detection fitted no scan and lost two (a Go2 calf and a Solo12 lower leg at 100 mm, delta
+/// 0.93 and 0.75 radii), and on a small part's 50 mm scans it cost 0.2-0.5 s a scan
+/// (docs/cad-scan-trials.md, forty-fourth session): its references all lie on the part,
+/// whose pairs are many, where the floor's are mostly coplanar and skipped.
+const OFF_PLANES_DELTA_PER_RADIUS: f64 = 1.0;
+
+/// Two detected poses are one when they put the part's centroid within this many detection
+/// steps of each other and differ by less than [`SAME_POSE_RAD`] in rotation (the detection's
+/// own merge, `ppf_poses_where`).
+const SAME_POSE_STEPS: f64 = 2.0;
+const SAME_POSE_RAD: f64 = 0.3;
+
 /// Poses of the part that the point pair features find in the cloud within what delta allows
 /// from the start (its origin within the translations and turns of the thesis's scheme), for a
 /// delta large enough to need them; none otherwise. Two detections, one model: in the whole
 /// cloud, the [`DETECTED_STARTS`] that explain the most of the scan, and in the cloud without
-/// its large planes, the [`DETECTED_OFF_PLANES_STARTS`] best.
+/// its large planes, the [`DETECTED_OFF_PLANES_STARTS`] best of the poses the first ones do not
+/// hold.
 ///
 /// A reference on a small link lying on the floor pairs mostly with the floor, and its best
 /// vote lays one of the link's faces on it: in the 37 cad-scans misses at 200-1000 mm whose
@@ -147,13 +162,13 @@ pub(super) fn detected_starts(
     // (the exploration's consensus, in a band of two detection steps, as far as a detected
     // pose is from the one it stands for), the near-true pose was among the 16 kept in most.
     let band_m = DETECTION_SCORE_BAND_PER_STEP * options.step_m;
-    let best_in = |scene: &[Point3<f64>], keep: usize| {
+    let best_in = |scene: &[Point3<f64>]| {
         let detected = model.poses_where(
             scene,
             (&(start * Point3::origin()), reach_m),
             // Every merged pose: the votes do not pick the starts, the consensus below does.
             usize::MAX,
-            0.3,
+            SAME_POSE_RAD,
             &within_turn,
         );
         let mut scored: Vec<(f64, Isometry3<f64>)> = detected
@@ -165,11 +180,23 @@ pub(super) fn detected_starts(
             .collect();
         // Stable: poses that score alike keep their vote order.
         scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-        scored.into_iter().take(keep).map(|(_, pose)| pose)
+        scored.into_iter().map(|(_, pose)| pose)
     };
-    let mut starts: Vec<Isometry3<f64>> = best_in(cloud, DETECTED_STARTS).collect();
-    if let Some(off_planes) = coarse.cloud_off_planes() {
-        starts.extend(best_in(off_planes, DETECTED_OFF_PLANES_STARTS));
+    let mut starts: Vec<Isometry3<f64>> = best_in(cloud).take(DETECTED_STARTS).collect();
+    let far = delta0_m >= OFF_PLANES_DELTA_PER_RADIUS * radius_m;
+    if let Some(off_planes) = coarse.cloud_off_planes().filter(|_| far) {
+        // Only poses the whole cloud's starts do not hold already (the detection's own test of
+        // one pose): a run from one of those would repeat a run.
+        let centroid = mesh.centroid();
+        let held = |pose: &Isometry3<f64>, by: &Isometry3<f64>| {
+            (pose * centroid - by * centroid).norm() < SAME_POSE_STEPS * options.step_m
+                && pose.rotation.angle_to(&by.rotation) < SAME_POSE_RAD
+        };
+        let new: Vec<Isometry3<f64>> = best_in(off_planes)
+            .filter(|pose| !starts.iter().any(|kept| held(pose, kept)))
+            .take(DETECTED_OFF_PLANES_STARTS)
+            .collect();
+        starts.extend(new);
     }
     starts
 }
