@@ -260,6 +260,19 @@ pub fn ppf_poses_where(
     })
 }
 
+/// Whether two poses of a model are one for the detection: they put its `centroid` within two
+/// steps (`step_m`) of each other and differ by less than `distinct_rad` in rotation.
+pub(crate) fn detected_alike(
+    a: &Isometry3<f64>,
+    b: &Isometry3<f64>,
+    centroid: &Point3<f64>,
+    step_m: f64,
+    distinct_rad: f64,
+) -> bool {
+    (a * centroid - b * centroid).norm() < 2.0 * step_m
+        && a.rotation.angle_to(&b.rotation) < distinct_rad
+}
+
 /// The model's side of the detection: its samples, their frames and the table of their pairs'
 /// descriptions, built once for as many scenes as are searched (the table alone took 5-95 ms
 /// of a 100 mm CAD-scan alignment, see [`FoldedAngleBins`]).
@@ -426,9 +439,13 @@ impl PpfModel {
                 break;
             }
             let same = merged.iter_mut().find(|m| {
-                (m.world_from_model * model_centroid - pose * model_centroid).norm()
-                    < 2.0 * options.step_m
-                    && m.world_from_model.rotation.angle_to(&pose.rotation) < distinct_rad
+                detected_alike(
+                    &m.world_from_model,
+                    &pose,
+                    &model_centroid,
+                    options.step_m,
+                    distinct_rad,
+                )
             });
             match same {
                 Some(m) => m.votes += count,

@@ -37,7 +37,8 @@ pub(super) struct Coarse {
     /// The planes left out of `without_planes` (a point on each and its unit normal; empty when
     /// the options keep them).
     planes: Vec<(Point3<f64>, Vector3<f64>)>,
-    /// The cloud's points off `planes`; `None` when there are none.
+    /// The cloud's points off `planes`; `None` when there are none, and when neither the
+    /// oriented score nor the wide exploration asks for them.
     cloud_off_planes: Option<Vec<Point3<f64>>>,
     band_m: f64,
 }
@@ -57,7 +58,11 @@ impl Coarse {
         // Only the keypoints the score counts, from the points off the planes: the floor is
         // most of a cell's scan, and its normals were 30-130 ms of 20-115k-point scans (a
         // probe, not kept).
-        let cloud_off_planes = (!planes.is_empty()).then(|| off_the_planes(cloud, &planes));
+        // For the normals and the wide exploration's second detection only: the robot fit's
+        // base stage, which needs neither, would copy its whole scan for nothing.
+        let cloud_off_planes = (!planes.is_empty()
+            && (options.oriented_score || options.wide_exploration))
+            .then(|| off_the_planes(cloud, &planes));
         let scored_normals = if options.oriented_score {
             let scored = without_planes.as_deref().unwrap_or(&all);
             let surface = cloud_off_planes.as_deref().unwrap_or(cloud);
@@ -92,7 +97,8 @@ impl Coarse {
         self.score(mesh, pose) < than_score - score_noise(than_score)
     }
 
-    /// The cloud without the planes the scores leave out; `None` when they leave none out.
+    /// The cloud without the planes the scores leave out; `None` when they leave none out (or
+    /// the options neither score oriented nor explore wide).
     pub(super) fn cloud_off_planes(&self) -> Option<&[Point3<f64>]> {
         self.cloud_off_planes.as_deref()
     }

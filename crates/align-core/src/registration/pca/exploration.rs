@@ -11,7 +11,7 @@ use super::{
 };
 use crate::geometry::Mesh;
 use crate::registration::convergence::pose_distance;
-use crate::registration::ppf::{PpfModel, PpfOptions};
+use crate::registration::ppf::{PpfModel, PpfOptions, detected_alike};
 use crate::registration::psa::spread_rotations;
 use crate::registration::sampling::voxel_representatives;
 
@@ -108,10 +108,8 @@ const DETECTED_OFF_PLANES_STARTS: usize = 8;
 /// whose pairs are many, where the floor's are mostly coplanar and skipped.
 const OFF_PLANES_DELTA_PER_RADIUS: f64 = 1.0;
 
-/// Two detected poses are one when they put the part's centroid within this many detection
-/// steps of each other and differ by less than [`SAME_POSE_RAD`] in rotation (as the detection
-/// merges its own votes).
-const SAME_POSE_STEPS: f64 = 2.0;
+/// Two detected poses differing by less than this in rotation (and putting the centroid within
+/// two detection steps, `ppf::detected_alike`) are one.
 const SAME_POSE_RAD: f64 = 0.3;
 
 /// Poses of the part that the point pair features find in the cloud within what delta allows
@@ -189,12 +187,13 @@ pub(super) fn detected_starts(
         // Only poses the whole cloud's starts do not hold already (the detection's own test of
         // one pose): a run from one of those would repeat a run.
         let centroid = mesh.centroid();
-        let held = |pose: &Isometry3<f64>, by: &Isometry3<f64>| {
-            (pose * centroid - by * centroid).norm() < SAME_POSE_STEPS * options.step_m
-                && pose.rotation.angle_to(&by.rotation) < SAME_POSE_RAD
+        let held = |pose: &Isometry3<f64>| {
+            starts
+                .iter()
+                .any(|kept| detected_alike(pose, kept, &centroid, options.step_m, SAME_POSE_RAD))
         };
         let new: Vec<Isometry3<f64>> = best_in(off_planes)
-            .filter(|pose| !starts.iter().any(|kept| held(pose, kept)))
+            .filter(|pose| !held(pose))
             .take(DETECTED_OFF_PLANES_STARTS)
             .collect();
         starts.extend(new);
