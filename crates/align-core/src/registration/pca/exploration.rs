@@ -112,7 +112,7 @@ const OFF_PLANES_DELTA_PER_RADIUS: f64 = 1.0;
 /// takes [`PpfOptions::default`]'s 500). Without the planes the scan near the start is mostly
 /// the part, and each reference pairs with the part's other samples, where on the floor most
 /// pairs are coplanar and skipped: on four 500-1000 mm scans of sets D and E the detection took
-/// 0.22-1.24 s with up to 500 references and 0.05-0.37 s with 150, and gave a quarter to a half as
+/// 0.22-1.24 s with up to 500 references and 0.05-0.37 s with 150, and gave a third to a half as
 /// many poses for the coarse score to rank (a probe build, not kept, beside a replay). Replayed
 /// with 150 (docs/cad-scan-trials.md, forty-fifth session): sets A-D at 200-1000 mm 421 -> 422
 /// of 480 (+4 -3, every scan lost flagged ambiguous), set E 88 of 120 as before (+3 -3). The
