@@ -108,17 +108,6 @@ const DETECTED_OFF_PLANES_STARTS: usize = 8;
 /// whose pairs are many, where the floor's are mostly coplanar and skipped.
 const OFF_PLANES_DELTA_PER_RADIUS: f64 = 1.0;
 
-/// Scene references of the detection without the large planes, at most (the whole cloud's
-/// takes [`PpfOptions::default`]'s 500). Without the planes the scan near the start is mostly
-/// the part, and each reference pairs with the part's other samples, where on the floor most
-/// pairs are coplanar and skipped: on four 500-1000 mm scans of sets D and E the detection took
-/// 0.22-1.24 s with up to 500 references and 0.05-0.37 s with 150, and gave a third to a half as
-/// many poses for the coarse score to rank (a probe build, not kept, beside a replay). Replayed
-/// with 150 (docs/cad-scan-trials.md, forty-fifth session): sets A-D at 200-1000 mm 421 -> 422
-/// of 480 (+4 -3, every scan lost flagged ambiguous), set E 88 of 120 as before (+3 -3). The
-/// only value tried.
-const OFF_PLANES_REFERENCES: usize = 150;
-
 /// Two detected poses differing by less than this in rotation (and putting the centroid within
 /// two detection steps, `ppf::detected_alike`) are one.
 const SAME_POSE_RAD: f64 = 0.3;
@@ -172,11 +161,10 @@ pub(super) fn detected_starts(
     // (the exploration's consensus, in a band of two detection steps, as far as a detected
     // pose is from the one it stands for), the near-true pose was among the 16 kept in most.
     let band_m = DETECTION_SCORE_BAND_PER_STEP * options.step_m;
-    let best_in = |scene: &[Point3<f64>], max_references: usize| {
+    let best_in = |scene: &[Point3<f64>]| {
         let detected = model.poses_where(
             scene,
             (&(start * Point3::origin()), reach_m),
-            max_references,
             // Every merged pose: the votes do not pick the starts, the consensus below does.
             usize::MAX,
             SAME_POSE_RAD,
@@ -193,9 +181,7 @@ pub(super) fn detected_starts(
         scored.sort_by(|a, b| b.0.total_cmp(&a.0));
         scored.into_iter().map(|(_, pose)| pose)
     };
-    let mut starts: Vec<Isometry3<f64>> = best_in(cloud, options.max_references)
-        .take(DETECTED_STARTS)
-        .collect();
+    let mut starts: Vec<Isometry3<f64>> = best_in(cloud).take(DETECTED_STARTS).collect();
     let far = delta0_m >= OFF_PLANES_DELTA_PER_RADIUS * radius_m;
     if let Some(off_planes) = coarse.cloud_off_planes().filter(|_| far) {
         // Only poses the whole cloud's starts do not hold already (the detection's own test of
@@ -206,7 +192,7 @@ pub(super) fn detected_starts(
                 .iter()
                 .any(|kept| detected_alike(pose, kept, &centroid, options.step_m, SAME_POSE_RAD))
         };
-        let new: Vec<Isometry3<f64>> = best_in(off_planes, OFF_PLANES_REFERENCES)
+        let new: Vec<Isometry3<f64>> = best_in(off_planes)
             .filter(|pose| !held(pose))
             .take(DETECTED_OFF_PLANES_STARTS)
             .collect();
