@@ -532,7 +532,14 @@ fn locate(
         let explore_here = || {
             let coarse = Coarse::new(mesh, cloud, options);
             let detected = if wide {
-                detected_starts(mesh, cloud, &coarse, base_from_part_start, delta0_m)
+                detected_starts(
+                    mesh,
+                    cloud,
+                    &coarse,
+                    base_from_part_start,
+                    delta0_m,
+                    options,
+                )
             } else {
                 Vec::new()
             };
