@@ -104,8 +104,8 @@ const DETECTED_OFF_PLANES_STARTS: usize = 8;
 /// [`detected_starts`]), the best by how they are detected; the only value tried.
 const REFINED_OFF_PLANES_DETECTIONS: usize = 64;
 
-/// Steps of a detected pose's refinement: from a band of two detection steps down about two
-/// halvings (see `STEPS_PER_BAND`); the only value tried.
+/// Steps of a detected pose's refinement, from a band of two detection steps: a band or two of
+/// the halving schedule (`STEPS_PER_BAND` at most in each); the only value tried.
 const REFINE_ITERATIONS: usize = 12;
 
 /// From a delta of this many part radii on, the start may not overlap the part at all, and
@@ -208,7 +208,7 @@ pub(super) fn detected_starts(
         // truth no run reached, the detection nearest the truth (9-31 mm off) ranked 11th to
         // 146th in nine. A few steps from each bring it onto the part, where the score's
         // narrow band tells it from the clutter: refined, it ranked first or second in eight,
-        // and fifth behind a twin that scores as well in one; the two ranked beyond the 64
+        // and fifth, behind poses that score as well, in one; the two ranked beyond the 64
         // refined stayed out (a probe, not kept; docs/cad-scan-trials.md, forty-sixth session).
         let candidates: Vec<Isometry3<f64>> = best_in(off_planes)
             .filter(|pose| !held(pose))
