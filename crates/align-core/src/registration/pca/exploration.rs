@@ -104,6 +104,14 @@ const DETECTED_OFF_PLANES_STARTS: usize = 8;
 /// [`detected_starts`]), the best by how they are detected; the only value tried.
 const REFINED_OFF_PLANES_DETECTIONS: usize = 64;
 
+/// From a delta of this many part radii on, the detection's poses without the large planes are
+/// refined before they are ranked (see [`detected_starts`]). Chosen after the replays: below it
+/// the refinement lost two scans and fitted one (a G1 torso at 1.02 radii, put on the box and
+/// not flagged; the shipped SO-ARM100 upper arm of `crates/cad-scans/tests/recovery.rs` at 1.19,
+/// flagged; a FingerEdu link at 1.09); from it, none of sets A-D was lost and three of set E's,
+/// each flagged (docs/cad-scan-trials.md, forty-sixth session).
+const REFINED_FROM_DELTA_PER_RADIUS: f64 = 1.5;
+
 /// Steps of a detected pose's refinement, from a band of two detection steps: a band or two of
 /// the halving schedule (`STEPS_PER_BAND` at most in each); the only value tried.
 const REFINE_ITERATIONS: usize = 12;
@@ -125,7 +133,8 @@ const SAME_POSE_RAD: f64 = 0.3;
 /// delta large enough to need them; none otherwise. Two detections, one model: in the whole
 /// cloud, the [`DETECTED_STARTS`] that explain the most of the scan, and in the cloud without
 /// its large planes, the [`DETECTED_OFF_PLANES_STARTS`] best of the poses the first ones do not
-/// hold, each refined by a few steps before it is ranked. `alignment_options`: for the
+/// hold, from [`REFINED_FROM_DELTA_PER_RADIUS`] on each refined by a few steps before it is
+/// ranked. `alignment_options`: for the
 /// refinements.
 ///
 /// In 36 cad-scans misses at 200-1000 mm whose truth no run reached, no merged pose of the
@@ -210,10 +219,19 @@ pub(super) fn detected_starts(
         // narrow band tells it from the clutter: refined, it ranked first or second in eight,
         // and fifth, behind poses that score as well, in one; the two ranked beyond the 64
         // refined stayed out (a probe, not kept; docs/cad-scan-trials.md, forty-sixth session).
+        let refined_first = delta0_m >= REFINED_FROM_DELTA_PER_RADIUS * radius_m;
         let candidates: Vec<Isometry3<f64>> = best_in(off_planes)
             .filter(|pose| !held(pose))
-            .take(REFINED_OFF_PLANES_DETECTIONS)
+            .take(if refined_first {
+                REFINED_OFF_PLANES_DETECTIONS
+            } else {
+                DETECTED_OFF_PLANES_STARTS
+            })
             .collect();
+        if !refined_first {
+            starts.extend(candidates);
+            return starts;
+        }
         let refine = PcaOptions {
             max_iterations: REFINE_ITERATIONS,
             window: 3,
