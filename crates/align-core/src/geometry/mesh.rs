@@ -16,6 +16,7 @@ use parry3d_f64::query::{PointQuery, PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
 use super::facing_tree::{Closest, FacingTree, Feature, NearbyTriangles};
+use super::inside_grid::InsideGrid;
 use super::spread::{PrincipalSpread, human_length, implausible_size_warning};
 
 /// A vertex spread (standard deviation) below this fraction of the largest one is no spread at
@@ -86,6 +87,8 @@ pub struct Mesh {
     face_normals: Vec<Vector3<f64>>,
     /// Built on the first facing query: registration of clouds never asks one.
     facing_tree: OnceLock<FacingTree>,
+    /// Built on the first inside test of a mesh that is not closed (see [`Mesh::is_inside_deeper_than`]).
+    inside_grid: OnceLock<InsideGrid>,
 }
 
 fn to_glam(p: &Point3<f64>) -> GlamVector {
@@ -196,6 +199,7 @@ impl Mesh {
             size_note,
             face_normals,
             facing_tree: OnceLock::new(),
+            inside_grid: OnceLock::new(),
         })
     }
 
@@ -506,13 +510,45 @@ impl Mesh {
     }
 
     fn build_facing_tree(&self, parallel: bool) -> FacingTree {
-        let corners: Vec<[Vector3<f64>; 3]> = (0..self.trimesh.num_triangles() as u32)
+        FacingTree::new(
+            &self.triangle_corners(),
+            &self.face_normals,
+            self.size_m(),
+            parallel,
+        )
+    }
+
+    fn triangle_corners(&self) -> Vec<[Vector3<f64>; 3]> {
+        (0..self.trimesh.num_triangles() as u32)
             .map(|i| {
                 let triangle = self.trimesh.triangle(i);
                 [triangle.a, triangle.b, triangle.c].map(from_glam)
             })
-            .collect();
-        FacingTree::new(&corners, &self.face_normals, self.size_m(), parallel)
+            .collect()
+    }
+
+    /// True when `query` lies in the part's material, deeper than `depth_m`, `closest` being
+    /// its closest point ([`Mesh::closest_point`]). A closed mesh answers by its signed
+    /// distance. One that is not (open seams, small openings, shells sharing edges) answers by
+    /// parity along rays (see `inside_grid`), for a query farther from its surface than
+    /// `depth_m` and than the grid's half cell; a sheet without thickness has no inside.
+    pub fn is_inside_deeper_than(
+        &self,
+        query: &Point3<f64>,
+        closest: &SurfacePoint,
+        depth_m: f64,
+    ) -> bool {
+        if self.watertight {
+            return closest.signed_distance < -depth_m;
+        }
+        // Built on one core: the first test often comes from a parallel loop's query, and a
+        // thread waiting here for its share of a parallel build could take up another query
+        // of this mesh and wait for the very cell it is filling (as `facing_tree`).
+        let grid = self.inside_grid.get_or_init(|| {
+            let (lower, upper) = self.bounds;
+            InsideGrid::new(&self.triangle_corners(), &lower, &upper)
+        });
+        closest.signed_distance > depth_m.max(grid.cell_half_diagonal_m()) && grid.contains(query)
     }
 
     /// A projection onto `triangle` as a [`SurfacePoint`]: the pseudo-normal on edges and

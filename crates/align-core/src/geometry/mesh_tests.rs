@@ -194,3 +194,83 @@ fn a_zero_area_triangle_closing_a_t_junction_gets_a_finite_normal() {
         assert!((found.signed_distance - signed).abs() < 1e-9, "{found:?}");
     }
 }
+
+/// The corners and triangles of an axis-aligned box `size_m` wide centred on `centre`.
+fn box_at(centre: Vector3<f64>, size_m: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>) {
+    let cube = Mesh::cuboid([size_m; 3]).unwrap();
+    let vertices = cube.vertices().map(|v| v + centre).collect();
+    (vertices, cube.triangles().to_vec())
+}
+
+#[test]
+fn an_open_mesh_is_inside_where_most_of_its_rays_leave_it() {
+    let (vertices, triangles) = box_at(Vector3::zeros(), 0.2);
+    let closed = Mesh::new(&vertices, &triangles).unwrap();
+    // Half of the top face gone: the rays up from under the opening leave through nothing.
+    let open = Mesh::new(&vertices, &[&triangles[..2], &triangles[3..]].concat()).unwrap();
+    assert!(!open.is_watertight());
+    let depth_m = 0.01;
+    for (query, inside) in [
+        (Point3::new(0.0, 0.0, 0.0), true),
+        (Point3::new(0.05, 0.05, 0.05), true),
+        (Point3::new(-0.05, 0.05, 0.05), true),
+        (Point3::new(0.0, 0.0, 0.095), false), // inside, but nearer than `depth_m`
+        (Point3::new(0.0, 0.0, 0.15), false),
+        (Point3::new(0.3, -0.2, 0.0), false),
+    ] {
+        for mesh in [&closed, &open] {
+            let closest = mesh.closest_point(&query);
+            assert_eq!(
+                mesh.is_inside_deeper_than(&query, &closest, depth_m),
+                inside,
+                "{query} in the {} box",
+                if mesh.is_watertight() {
+                    "closed"
+                } else {
+                    "open"
+                }
+            );
+        }
+    }
+}
+
+#[test]
+fn a_point_inside_two_overlapping_bodies_is_inside_and_a_sheet_has_no_inside() {
+    // Two boxes overlapping by half, one of them open: a ray from their common part leaves
+    // both (parity along it would call the point outside).
+    let (mut vertices, mut triangles) = box_at(Vector3::zeros(), 0.2);
+    let (second, second_triangles) = box_at(Vector3::new(0.1, 0.0, 0.0), 0.2);
+    let offset = vertices.len() as u32;
+    vertices.extend(second);
+    triangles.extend(second_triangles[1..].iter().map(|t| t.map(|i| i + offset)));
+    let overlapping = Mesh::new(&vertices, &triangles).unwrap();
+    assert!(!overlapping.is_watertight());
+    for (query, inside) in [
+        (Point3::new(0.05, 0.0, 0.0), true),
+        (Point3::new(-0.05, 0.0, 0.0), true),
+        (Point3::new(0.15, 0.02, -0.03), true),
+        (Point3::new(0.05, 0.0, 0.2), false),
+    ] {
+        let closest = overlapping.closest_point(&query);
+        assert_eq!(
+            overlapping.is_inside_deeper_than(&query, &closest, 0.01),
+            inside,
+            "{query}"
+        );
+    }
+    let sheet = Mesh::new(
+        &[
+            Point3::new(-0.1, -0.1, 0.0),
+            Point3::new(0.1, -0.1, 0.01),
+            Point3::new(0.1, 0.1, 0.0),
+            Point3::new(-0.1, 0.1, 0.02),
+        ],
+        &[[0, 1, 2], [0, 2, 3]],
+    )
+    .unwrap();
+    for z in [-0.05, 0.05] {
+        let query = Point3::new(0.01, -0.02, z);
+        let closest = sheet.closest_point(&query);
+        assert!(!sheet.is_inside_deeper_than(&query, &closest, 0.01), "{z}");
+    }
+}

@@ -3,6 +3,7 @@
 
 mod distance_grid;
 mod facing_tree;
+mod inside_grid;
 mod mesh;
 pub mod shapes;
 mod spread;

@@ -168,7 +168,7 @@ pub(super) fn oriented_consensus(
                     (part_from_base.rotation * normal).dot(&surface).abs() < AGREEING_NORMALS_COS
                 });
                 if across { 0.0 } else { 1.0 }
-            } else if closest.signed_distance < -band && mesh.is_watertight() {
+            } else if mesh.is_inside_deeper_than(&p, &closest, band) {
                 -2.0
             } else {
                 0.0
@@ -276,6 +276,27 @@ pub(super) mod tests {
             "{oriented} of {over_the_face}"
         );
         assert!(oriented < plain, "{oriented} of {plain}");
+    }
+
+    #[test]
+    fn keypoints_deep_inside_an_open_mesh_count_against_a_pose_as_in_a_closed_one() {
+        let closed = Mesh::cuboid([0.2, 0.2, 0.2]).unwrap();
+        let vertices: Vec<_> = closed.vertices().collect();
+        let open = Mesh::new(&vertices, &closed.triangles()[1..]).unwrap();
+        assert!(!open.is_watertight());
+        // Keypoints every 20 mm through the box and 60 mm past it on every side, but for the
+        // layer on its faces (where the opening is, a keypoint is on the surface of one mesh
+        // and not of the other): 9 x 9 x 9 inside, 20 mm deep at least.
+        let keypoints: Vec<Point3<f64>> = (-8..=8)
+            .flat_map(|i| (-8..=8).flat_map(move |j| (-8..=8).map(move |k| [i, j, k])))
+            .filter(|index| index.iter().all(|&i: &i32| i.abs() != 5))
+            .map(|[i, j, k]| Point3::new(f64::from(i), f64::from(j), f64::from(k)) * 0.02)
+            .collect();
+        let pose = Isometry3::identity();
+        let band_m = 0.01;
+        let expected = -2.0 * (9 * 9 * 9) as f64;
+        assert_eq!(consensus(&closed, &keypoints, &pose, band_m), expected);
+        assert_eq!(consensus(&open, &keypoints, &pose, band_m), expected);
     }
 
     #[test]
