@@ -10,6 +10,7 @@ mod spread;
 
 pub use distance_grid::DistanceGrid;
 pub use facing_tree::NearbyTriangles;
+pub use inside_grid::InsideGrid;
 pub use mesh::{Mesh, MeshError, SignedClosest, SurfacePoint};
 pub use spread::{
     PLAUSIBLE_PART_SIZE_M, PrincipalSpread, human_length, implausible_size_warning, plane_through,

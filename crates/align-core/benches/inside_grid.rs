@@ -1,0 +1,152 @@
+//! The inside grid of meshes that are not closed (`geometry::InsideGrid`, which the coarse
+//! score of a cloud alignment builds on its first inside test of such a mesh): its build time
+//! per mesh, the share of the box it calls inside, and, on closed meshes, how often it agrees
+//! with the signed distance (random points of the box farther than a cell's half diagonal from
+//! the surface). Best of `--runs` builds each; a table for people.
+//!
+//! Run: cargo bench -p align-core --bench inside_grid -- [--runs N] [--points N] [MESH ...]
+//! Without meshes it reads the xArm7 and SO-ARM100 links in crates/cad-scans/meshes; the links of
+//! docs/cad-scan-trials.md come from `scripts/unseen-parts.sh OUT`, the ABB IRB 1600's from
+//! ../shared/data (abb_irb1600_support/meshes/irb1600/visual).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use align_core::geometry::{InsideGrid, Mesh};
+use align_core::io::read_mesh;
+use align_core::rng::SplitMix64;
+use nalgebra::{Point3, Vector3};
+
+struct Args {
+    runs: usize,
+    points: usize,
+    paths: Vec<PathBuf>,
+}
+
+fn parse_args() -> Result<Option<Args>, String> {
+    let mut parsed = Args {
+        runs: 5,
+        points: 20_000,
+        paths: Vec::new(),
+    };
+    let mut args = std::env::args().skip(1);
+    let count = |value: Option<String>, flag: &str| {
+        value
+            .and_then(|v| v.parse().ok())
+            .filter(|&n: &usize| n > 0)
+            .ok_or(format!("{flag} needs a positive whole number"))
+    };
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--runs" => parsed.runs = count(args.next(), "--runs")?,
+            "--points" => parsed.points = count(args.next(), "--points")?,
+            "--help" | "-h" => {
+                println!(
+                    "inside_grid [--runs N (5)] [--points N (20000)] [MESH ...]: the inside \
+                     grid's build time per mesh, and its agreement with closed meshes' signed \
+                     distances"
+                );
+                return Ok(None);
+            }
+            // cargo bench passes --bench to every bench binary.
+            "--bench" => {}
+            _ => parsed.paths.push(PathBuf::from(arg)),
+        }
+    }
+    if parsed.paths.is_empty() {
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../cad-scans/meshes");
+        let mut found: Vec<PathBuf> = std::fs::read_dir(&shipped)
+            .map_err(|error| format!("{}: {error}", shipped.display()))?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "stl"))
+            .collect();
+        found.sort();
+        parsed.paths = found;
+    }
+    Ok(Some(parsed))
+}
+
+fn main() {
+    let args = match parse_args() {
+        Ok(Some(args)) => args,
+        Ok(None) => return,
+        Err(message) => {
+            eprintln!("inside_grid: {message}");
+            std::process::exit(2);
+        }
+    };
+    println!(
+        "| mesh | triangles | closed | grid build (ms) | inside (share of the box) | agrees with the signed distance |"
+    );
+    println!("| --- | ---: | --- | ---: | ---: | ---: |");
+    for path in &args.paths {
+        let mesh = match read_mesh(path, 1.0)
+            .map_err(|e| e.to_string())
+            .and_then(|soup| Mesh::new(&soup.vertices, &soup.triangles).map_err(|e| e.to_string()))
+        {
+            Ok(mesh) => mesh,
+            Err(error) => {
+                eprintln!("skipped {}: {error}", path.display());
+                continue;
+            }
+        };
+        let vertices: Vec<Point3<f64>> = mesh.vertices().collect();
+        let corners: Vec<[Vector3<f64>; 3]> = mesh
+            .triangles()
+            .iter()
+            .map(|t| t.map(|i| vertices[i as usize].coords))
+            .collect();
+        let (lower, upper) = mesh.bounds();
+        let mut build_s = f64::INFINITY;
+        let mut grid = None;
+        for _ in 0..args.runs {
+            let clock = Instant::now();
+            let built = InsideGrid::new(&corners, &lower, &upper);
+            build_s = build_s.min(clock.elapsed().as_secs_f64());
+            grid = Some(built);
+        }
+        let Some(grid) = grid else { continue };
+        let mut rng = SplitMix64::new(7);
+        let (mut counted, mut inside, mut agreeing) = (0usize, 0usize, 0usize);
+        for _ in 0..args.points {
+            let query = Point3::from(Vector3::from_fn(|axis, _| {
+                lower[axis] + rng.uniform() * (upper[axis] - lower[axis])
+            }));
+            let signed_m = mesh.closest_point(&query).signed_distance;
+            if signed_m.abs() <= grid.cell_half_diagonal_m() {
+                continue;
+            }
+            counted += 1;
+            let in_grid = grid.contains(&query);
+            inside += usize::from(in_grid);
+            agreeing += usize::from(in_grid == (signed_m < 0.0));
+        }
+        let share = |n: usize| n as f64 / counted.max(1) as f64;
+        println!(
+            "| {} | {} | {} | {:.2} | {:.3} | {} |",
+            shown_name(path),
+            mesh.num_triangles(),
+            if mesh.is_watertight() { "yes" } else { "no" },
+            build_s * 1e3,
+            share(inside),
+            if mesh.is_watertight() {
+                format!("{:.1} %", 100.0 * share(agreeing))
+            } else {
+                "-".to_owned()
+            }
+        );
+    }
+}
+
+/// The file's name and its folder's (robots name their links alike: `arm_1.stl`).
+fn shown_name(path: &Path) -> String {
+    let name = |p: Option<&Path>| {
+        p.and_then(Path::file_name)
+            .map(|n| n.to_string_lossy().into_owned())
+    };
+    match (name(path.parent()), name(Some(path))) {
+        (Some(folder), Some(file)) => format!("{folder}/{file}"),
+        _ => path.display().to_string(),
+    }
+}
