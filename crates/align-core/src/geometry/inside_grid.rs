@@ -1,16 +1,17 @@
 //! Which points lie inside a mesh that is not closed, for the scores that count a scan point in
 //! a part's material against a pose. A closed mesh answers by the side of its closest feature
-//! (signed distances); most robot meshes people publish are not closed (20 of the 50 links of
-//! `scripts/unseen-parts.sh` and five of the ABB IRB 1600's visual links have boundary edges,
-//! or edges three triangles share), yet most of them enclose their material but for seams and
-//! small openings, and some are several closed bodies that overlap. Their inside is decided
-//! here along rays: a ray from a point that leaves the surface more often than it enters it
-//! (its crossings counted by the side the triangles face, a winding number along the ray)
-//! votes the point inside, and a point five of whose six axis-aligned rays (both ways along x,
-//! y and z) vote so is inside. A seam does not change a ray's count; an opening, or a triangle
-//! facing the wrong way, changes the count of the rays through it only; a point inside two
-//! overlapping bodies leaves both (where parity would call it outside); a sheet without
-//! thickness gets three votes at most, and nothing about it is called inside.
+//! (signed distances), but many robot meshes people publish are not closed: 20 of the 50 links
+//! of `scripts/unseen-parts.sh` and all six of the ABB IRB 1600's visual links have boundary
+//! edges, or edges more than two triangles share (`cargo bench -p align-core --bench
+//! inside_grid`). Most of them still enclose their material but for seams and small openings,
+//! and some are several closed bodies that overlap. Their inside is decided here along rays: a
+//! ray from a point whose crossings of the surface, counted by the side each triangle faces,
+//! do not cancel (a winding number along the ray) votes the point inside, and a point five of
+//! whose six axis-aligned rays (both ways along x, y and z) vote so is inside. A seam does not
+//! change a ray's count; an opening, or a triangle facing the wrong way, changes the count of
+//! the rays through it only; a point inside two overlapping bodies leaves both (where parity
+//! would call it outside); a sheet without thickness gets three votes at most, and nothing
+//! about it is called inside.
 
 use nalgebra::{Point3, Vector3};
 
@@ -132,7 +133,8 @@ impl InsideGrid {
                 }
                 index[axis] = cell;
                 let flat = self.flat(index);
-                // Towards -axis the ray leaves through triangles facing -axis.
+                // Towards -axis the ray leaves through triangles facing -axis; a body whose
+                // triangles all face inwards counts the other way, and still votes.
                 self.votes[flat] += u8::from(total - behind != 0) + u8::from(behind != 0);
             }
         }

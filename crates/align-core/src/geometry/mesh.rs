@@ -87,7 +87,8 @@ pub struct Mesh {
     face_normals: Vec<Vector3<f64>>,
     /// Built on the first facing query: registration of clouds never asks one.
     facing_tree: OnceLock<FacingTree>,
-    /// Built on the first inside test of a mesh that is not closed (see [`Mesh::is_inside_deeper_than`]).
+    /// Built on the first inside test of a mesh that is not closed (see
+    /// [`Mesh::is_inside_deeper_than`]).
     inside_grid: OnceLock<InsideGrid>,
 }
 
@@ -530,8 +531,9 @@ impl Mesh {
     /// True when `query` lies in the part's material, deeper than `depth_m`, `closest` being
     /// its closest point ([`Mesh::closest_point`]). A closed mesh answers by its signed
     /// distance. One that is not (open seams, small openings, shells sharing edges) answers by
-    /// parity along rays (see `inside_grid`), for a query farther from its surface than
-    /// `depth_m` and than the grid's half cell; a sheet without thickness has no inside.
+    /// winding numbers along rays (see [`InsideGrid`]), for a query farther from its surface
+    /// than `depth_m` and than the grid's half cell diagonal; a sheet without thickness has no
+    /// inside.
     pub fn is_inside_deeper_than(
         &self,
         query: &Point3<f64>,
