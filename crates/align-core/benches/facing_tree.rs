@@ -7,12 +7,16 @@
 //! Without meshes it times the xArm7 and SO-ARM100 links in crates/cad-scans/meshes; the larger
 //! links of docs/cad-scan-trials.md come from `scripts/unseen-parts.sh OUT` (OUT/z1/*.stl).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use align_core::geometry::Mesh;
 use align_core::io::read_mesh;
 use nalgebra::Point3;
+
+#[path = "common/shipped_meshes.rs"]
+mod shipped_meshes;
+use shipped_meshes::shipped_meshes;
 
 fn main() {
     let mut runs = 5usize;
@@ -39,18 +43,13 @@ fn main() {
         }
     }
     if paths.is_empty() {
-        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../cad-scans/meshes");
-        let mut found: Vec<PathBuf> = std::fs::read_dir(&shipped)
-            .map(|entries| {
-                entries
-                    .filter_map(Result::ok)
-                    .map(|e| e.path())
-                    .filter(|p| p.extension().is_some_and(|e| e == "stl"))
-                    .collect()
-            })
-            .unwrap_or_default();
-        found.sort();
-        paths = found;
+        paths = match shipped_meshes() {
+            Ok(paths) => paths,
+            Err(message) => {
+                eprintln!("facing_tree: {message}");
+                std::process::exit(2);
+            }
+        };
     }
     println!("| mesh | triangles | prepared, on the pool (ms) | lazy, one core (ms) |");
     println!("| --- | ---: | ---: | ---: |");

@@ -17,6 +17,10 @@ use align_core::io::read_mesh;
 use align_core::rng::SplitMix64;
 use nalgebra::{Point3, Vector3};
 
+#[path = "common/shipped_meshes.rs"]
+mod shipped_meshes;
+use shipped_meshes::shipped_meshes;
+
 struct Args {
     runs: usize,
     points: usize,
@@ -54,15 +58,7 @@ fn parse_args() -> Result<Option<Args>, String> {
         }
     }
     if parsed.paths.is_empty() {
-        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../cad-scans/meshes");
-        let mut found: Vec<PathBuf> = std::fs::read_dir(&shipped)
-            .map_err(|error| format!("{}: {error}", shipped.display()))?
-            .filter_map(Result::ok)
-            .map(|e| e.path())
-            .filter(|p| p.extension().is_some_and(|e| e == "stl"))
-            .collect();
-        found.sort();
-        parsed.paths = found;
+        parsed.paths = shipped_meshes()?;
     }
     Ok(Some(parsed))
 }
