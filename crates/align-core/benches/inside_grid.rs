@@ -1,10 +1,14 @@
 //! The inside grid of meshes that are not closed (`geometry::InsideGrid`, which the coarse
 //! score of a cloud alignment builds on its first inside test of such a mesh): its build time
-//! per mesh, the share of the box it calls inside, and, on closed meshes, how often it agrees
-//! with the signed distance (random points of the box farther than a cell's half diagonal from
-//! the surface). Best of `--runs` builds each; a table for people.
+//! per mesh, the share of the box it calls inside, and how often it agrees with the signed
+//! distance (closed meshes) and with the exact winding number (every mesh), on random points of
+//! the box farther than a cell's half diagonal from the surface. The exact winding number (the
+//! solid angles of all triangles summed, over 4 pi; inside above one half) is the reference for
+//! both: it is right for closed bodies that overlap, where the side of the closest feature is
+//! not, and it is defined for open meshes. Best of `--runs` builds each; a table for people.
 //!
-//! Run: cargo bench -p align-core --bench inside_grid -- [--runs N] [--points N] [MESH ...]
+//! Run: cargo bench -p align-core --bench inside_grid -- [--runs N] [--points N]
+//! [--winding-points N] [MESH ...]
 //! Without meshes it reads the xArm7 and SO-ARM100 links in crates/cad-scans/meshes; the links of
 //! docs/cad-scan-trials.md come from `scripts/unseen-parts.sh OUT`, the ABB IRB 1600's from
 //! ../shared/data (abb_irb1600_support/meshes/irb1600/visual).
@@ -24,6 +28,9 @@ use shipped_meshes::shipped_meshes;
 struct Args {
     runs: usize,
     points: usize,
+    /// How many of the points are also tested against the exact winding number (it visits
+    /// every triangle for every point).
+    winding_points: usize,
     paths: Vec<PathBuf>,
 }
 
@@ -31,6 +38,7 @@ fn parse_args() -> Result<Option<Args>, String> {
     let mut parsed = Args {
         runs: 5,
         points: 20_000,
+        winding_points: 2_000,
         paths: Vec::new(),
     };
     let mut args = std::env::args().skip(1);
@@ -44,11 +52,13 @@ fn parse_args() -> Result<Option<Args>, String> {
         match arg.as_str() {
             "--runs" => parsed.runs = count(args.next(), "--runs")?,
             "--points" => parsed.points = count(args.next(), "--points")?,
+            "--winding-points" => parsed.winding_points = count(args.next(), "--winding-points")?,
             "--help" | "-h" => {
                 println!(
-                    "inside_grid [--runs N (5)] [--points N (20000)] [MESH ...]: the inside \
-                     grid's build time per mesh, and its agreement with closed meshes' signed \
-                     distances"
+                    "inside_grid [--runs N (5)] [--points N (20000)] [--winding-points N \
+                     (2000)] [MESH ...]: the inside grid's build time per mesh, its agreement \
+                     with closed meshes' signed distances, and the agreement of both with the \
+                     exact winding number"
                 );
                 return Ok(None);
             }
@@ -73,9 +83,9 @@ fn main() {
         }
     };
     println!(
-        "| mesh | triangles | closed | grid build (ms) | inside (share of the box) | agrees with the signed distance |"
+        "| mesh | triangles | closed | bodies | grid build (ms) | inside (share of the box) | grid = signed distance | grid = winding number | signed distance = winding number |"
     );
-    println!("| --- | ---: | --- | ---: | ---: | ---: |");
+    println!("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |");
     for path in &args.paths {
         let mesh = match read_mesh(path, 1.0)
             .map_err(|e| e.to_string())
@@ -105,6 +115,7 @@ fn main() {
         let Some(grid) = grid else { continue };
         let mut rng = SplitMix64::new(7);
         let (mut counted, mut inside, mut agreeing) = (0usize, 0usize, 0usize);
+        let (mut wound, mut grid_wound, mut signed_wound) = (0usize, 0usize, 0usize);
         for _ in 0..args.points {
             let query = Point3::from(Vector3::from_fn(|axis, _| {
                 lower[axis] + rng.uniform() * (upper[axis] - lower[axis])
@@ -117,22 +128,52 @@ fn main() {
             let in_grid = grid.contains(&query);
             inside += usize::from(in_grid);
             agreeing += usize::from(in_grid == (signed_m < 0.0));
+            if wound < args.winding_points {
+                let in_winding = winding_number(&corners, &query).abs() > 0.5;
+                wound += 1;
+                grid_wound += usize::from(in_grid == in_winding);
+                signed_wound += usize::from((signed_m < 0.0) == in_winding);
+            }
         }
         let share = |n: usize| n as f64 / counted.max(1) as f64;
-        println!(
-            "| {} | {} | {} | {:.2} | {:.3} | {} |",
-            shown_name(path),
-            mesh.num_triangles(),
-            if mesh.is_watertight() { "yes" } else { "no" },
-            build_s * 1e3,
-            share(inside),
+        let percent = |n: usize, of: usize| format!("{:.1} %", 100.0 * n as f64 / of.max(1) as f64);
+        let closed_only = |figure: String| {
             if mesh.is_watertight() {
-                format!("{:.1} %", 100.0 * share(agreeing))
+                figure
             } else {
                 "-".to_owned()
             }
+        };
+        println!(
+            "| {} | {} | {} | {} | {:.2} | {:.3} | {} | {} | {} |",
+            shown_name(path),
+            mesh.num_triangles(),
+            if mesh.is_watertight() { "yes" } else { "no" },
+            mesh.bodies(),
+            build_s * 1e3,
+            share(inside),
+            closed_only(percent(agreeing, counted)),
+            percent(grid_wound, wound),
+            closed_only(percent(signed_wound, wound)),
         );
     }
+}
+
+/// The generalised winding number of `triangles` about `point`: the solid angles they subtend,
+/// signed by the side they face, over 4 pi (van Oosterom and Strackee's formula). 1 inside a
+/// closed outward-facing body, 0 outside, the count of bodies where closed bodies overlap.
+fn winding_number(triangles: &[[Vector3<f64>; 3]], point: &Point3<f64>) -> f64 {
+    let solid_angle_sum: f64 = triangles
+        .iter()
+        .map(|corners| {
+            let [a, b, c] = corners.map(|corner| corner - point.coords);
+            let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
+            let numerator = a.dot(&b.cross(&c));
+            let denominator = la * lb * lc + a.dot(&b) * lc + a.dot(&c) * lb + b.dot(&c) * la;
+            2.0 * numerator.atan2(denominator)
+        })
+        .sum();
+    solid_angle_sum / (4.0 * std::f64::consts::PI)
 }
 
 /// The file's name and its folder's (robots name their links alike: `arm_1.stl`).

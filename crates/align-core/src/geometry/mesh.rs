@@ -16,7 +16,7 @@ use parry3d_f64::query::{PointQuery, PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
 use super::facing_tree::{Closest, FacingTree, Feature, NearbyTriangles};
-use super::inside_grid::InsideGrid;
+use super::inside_grid::{InsideGrid, count_bodies};
 use super::spread::{PrincipalSpread, human_length, implausible_size_warning};
 
 /// A vertex spread (standard deviation) below this fraction of the largest one is no spread at
@@ -87,7 +87,9 @@ pub struct Mesh {
     face_normals: Vec<Vector3<f64>>,
     /// Built on the first facing query: registration of clouds never asks one.
     facing_tree: OnceLock<FacingTree>,
-    /// Built on the first inside test of a mesh that is not closed (see
+    /// Separate bodies (groups of triangles sharing vertices): closed bodies may overlap.
+    bodies: usize,
+    /// Built on the first inside test of a mesh that is not closed or not one body (see
     /// [`Mesh::is_inside_deeper_than`]).
     inside_grid: OnceLock<InsideGrid>,
 }
@@ -190,6 +192,7 @@ impl Mesh {
                 notes.len() - 1
             });
         let face_normals = face_normals_of(&trimesh);
+        let bodies = count_bodies(trimesh.indices(), trimesh.vertices().len());
         Ok(Self {
             trimesh,
             watertight,
@@ -200,6 +203,7 @@ impl Mesh {
             size_note,
             face_normals,
             facing_tree: OnceLock::new(),
+            bodies,
             inside_grid: OnceLock::new(),
         })
     }
@@ -236,6 +240,11 @@ impl Mesh {
     /// True when distances are signed (closed, consistently oriented mesh).
     pub fn is_watertight(&self) -> bool {
         self.watertight
+    }
+
+    /// How many separate bodies (groups of triangles sharing vertices) the mesh is.
+    pub fn bodies(&self) -> usize {
+        self.bodies
     }
 
     /// Remarks on how the mesh was interpreted (e.g. why distances are unsigned, that it is flat,
@@ -533,15 +542,19 @@ impl Mesh {
     /// distance. One that is not (open seams, small openings, shells sharing edges) answers by
     /// winding numbers along rays (see [`InsideGrid`]), for a query farther from its surface
     /// than `depth_m` and than the grid's half cell diagonal; a sheet without thickness has no
-    /// inside.
+    /// inside. A closed mesh of several bodies asks the grid too where its signed distance says
+    /// outside: that is wrong where the bodies overlap, and never wrong the other way.
     pub fn is_inside_deeper_than(
         &self,
         query: &Point3<f64>,
         closest: &SurfacePoint,
         depth_m: f64,
     ) -> bool {
-        if self.watertight {
-            return closest.signed_distance < -depth_m;
+        if self.watertight && closest.signed_distance < -depth_m {
+            return true;
+        }
+        if self.watertight && self.bodies == 1 {
+            return false;
         }
         // Built on one core: the first test often comes from a parallel loop's query, and a
         // thread waiting here for its share of a parallel build could take up another query
@@ -550,7 +563,8 @@ impl Mesh {
             let (lower, upper) = self.bounds;
             InsideGrid::new(&self.triangle_corners(), &lower, &upper)
         });
-        closest.signed_distance > depth_m.max(grid.cell_half_diagonal_m()) && grid.contains(query)
+        closest.signed_distance.abs() > depth_m.max(grid.cell_half_diagonal_m())
+            && grid.contains(query)
     }
 
     /// A projection onto `triangle` as a [`SurfacePoint`]: the pseudo-normal on edges and

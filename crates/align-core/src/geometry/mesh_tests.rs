@@ -274,3 +274,61 @@ fn a_point_inside_two_overlapping_bodies_is_inside_and_a_sheet_has_no_inside() {
         assert!(!sheet.is_inside_deeper_than(&query, &closest, 0.01), "{z}");
     }
 }
+
+#[test]
+fn a_box_missing_two_faces_is_inside_and_a_channel_is_not() {
+    // From the centre of a box each face subtends a sixth of the sphere: with two faces gone
+    // the exact winding number there is 2/3 (inside), with three gone 1/2 (a channel, no
+    // inside). Four of the six rays from the centre cross the first, three the second.
+    let (vertices, triangles) = box_at(Vector3::zeros(), 0.2);
+    let without = |faces: &[usize]| {
+        let kept: Vec<[u32; 3]> = triangles
+            .iter()
+            .enumerate()
+            .filter(|(index, _)| !faces.contains(&(index / 2)))
+            .map(|(_, triangle)| *triangle)
+            .collect();
+        Mesh::new(&vertices, &kept).unwrap()
+    };
+    // Faces of `Mesh::cuboid`: z-, z+, y-, y+, x-, x+.
+    let two_gone = without(&[1, 5]);
+    let channel = without(&[1, 2, 3]);
+    let centre = Point3::origin();
+    for (mesh, inside) in [(&two_gone, true), (&channel, false)] {
+        assert!(!mesh.is_watertight());
+        let closest = mesh.closest_point(&centre);
+        assert_eq!(mesh.is_inside_deeper_than(&centre, &closest, 0.01), inside);
+    }
+}
+
+#[test]
+fn a_point_where_two_closed_bodies_overlap_is_inside_though_its_closest_face_says_outside() {
+    let (mut vertices, mut triangles) = box_at(Vector3::zeros(), 0.2);
+    let (second, second_triangles) = box_at(Vector3::new(0.1, 0.0, 0.0), 0.2);
+    let offset = vertices.len() as u32;
+    vertices.extend(second);
+    triangles.extend(second_triangles.iter().map(|t| t.map(|i| i + offset)));
+    let two_bodies = Mesh::new(&vertices, &triangles).unwrap();
+    assert!(two_bodies.is_watertight());
+    assert_eq!(two_bodies.bodies(), 2);
+    assert_eq!(Mesh::cuboid([0.2; 3]).unwrap().bodies(), 1);
+    // In the first box, 3 cm in front of the second box's face at x = 0: that face is the
+    // closest feature and says outside.
+    let query = Point3::new(-0.03, 0.0, 0.0);
+    let closest = two_bodies.closest_point(&query);
+    assert!(closest.signed_distance > 0.0);
+    assert!(two_bodies.is_inside_deeper_than(&query, &closest, 0.01));
+    for (query, inside) in [
+        (Point3::new(0.05, 0.0, 0.0), true),
+        (Point3::new(0.17, 0.0, 0.0), true),
+        (Point3::new(0.05, 0.0, 0.15), false),
+        (Point3::new(-0.2, 0.0, 0.0), false),
+    ] {
+        let closest = two_bodies.closest_point(&query);
+        assert_eq!(
+            two_bodies.is_inside_deeper_than(&query, &closest, 0.01),
+            inside,
+            "{query}"
+        );
+    }
+}
