@@ -15,11 +15,11 @@
 //!
 //! A closed mesh made of several bodies (each closed) that overlap is not answered rightly by
 //! the side of its closest feature either: in the common part of two bodies the closest feature
-//! is often the other body's face, seen from outside that body. Seven of the unseen links'
-//! closed meshes are such (UR5's forearm, shoulder and upper arm, Cassie's pelvis, G1's knee,
-//! Bolt's body, PR2's elbow), and their signed distances call 1-11 % of the points of their box
-//! outside that are inside by the exact winding number, where this grid agrees with it on all
-//! (`cargo bench -p align-core --bench inside_grid`).
+//! is often the other body's face, seen from outside that body. Six of the unseen links' closed
+//! meshes are such (UR5's forearm, shoulder and upper arm, Cassie's pelvis, G1's knee, Bolt's
+//! body), and their signed distances call 1-11 % of the points of their box outside that are
+//! inside by the exact winding number, where this grid agrees with it on all (`cargo bench -p
+//! align-core --bench inside_grid`). [`count_bodies`] tells which meshes may be such.
 
 use nalgebra::{Point3, Vector3};
 
