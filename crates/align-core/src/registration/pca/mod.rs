@@ -52,7 +52,7 @@ use self::schedule::{
     RunSlack, ScheduleRun, coarser_levels, coarser_without_large_planes, model_to_scan_levels,
     run_schedule, run_schedule_on_levels, wide_band_samples,
 };
-use self::tie_break::{Undecided, decide_finely};
+use self::tie_break::{Undecided, decide_finely, local_end_ahead};
 use self::uncertainty::cloud_uncertainty;
 use super::sampling::{voxel_centroids, voxel_representatives};
 use crate::geometry::{Mesh, PrincipalSpread};
@@ -116,6 +116,10 @@ pub struct PcaOptions {
     /// already (set A at 50 mm: 38 -> 40 of 40, median 65 -> 47 ms). Off: the exploration's
     /// ends only, as the robot fit's rigid stage of the whole robot was measured.
     pub local_candidate: bool,
+    /// After everything else, the local stage's end (`local_candidate`) is the pose when it
+    /// explains clearly more of the scan than the pose found, at the scanner's scale (see
+    /// `tie_break::local_end_ahead`). Off: the local end only competes by the coarse score.
+    pub local_end_last_look: bool,
     /// After the run from the best start, runs from the found pose turned every way the delta
     /// allows: they reach a symmetric part's twin (for the uniqueness margin) and a better pose
     /// the exploration from the start missed. Off: no uniqueness is reported and the runs are
@@ -238,6 +242,7 @@ impl Default for PcaOptions {
             without_large_planes: true,
             twin_search: true,
             local_candidate: true,
+            local_end_last_look: true,
             fine_run: true,
             wide_band_slack: true,
             local_band_within_radius: true,
@@ -523,6 +528,8 @@ fn locate(
     // The local stage's run, when its end is the best: it has run the schedule down to the
     // narrowest band on the fine keypoints and polished, all the run below would do again.
     let mut local_won: Option<ScheduleRun> = None;
+    // The local stage's end whether it won or not, for the last comparison (see `local_end_ahead`).
+    let mut local_end_run: Option<ScheduleRun> = None;
     let mut coarse: Option<Coarse> = None;
     if options.starts > 0 {
         let wide = options.wide_exploration && is_wide(mesh, delta0_m);
@@ -585,6 +592,7 @@ fn locate(
         };
         let coarse = coarse.insert(made);
         if let Some(local_run) = local_end {
+            local_end_run = Some(local_run);
             let pose = local_run.pose;
             scored.push((coarse.score(mesh, &pose), pose));
             // Stable: an end that scores as the local one does keeps its place before it.
@@ -768,6 +776,14 @@ fn locate(
             schedule_from,
             options,
         )
+    {
+        explored_ends.push((coarse.score(mesh, &run.pose), run.pose));
+        run = better;
+        uniqueness_found = uniqueness(mesh, coarse, &run.pose, &explored_ends);
+    }
+    if options.local_end_last_look
+        && let (Some(coarse), Some(local_run)) = (&coarse, local_end_run)
+        && let Some(better) = local_end_ahead(mesh, coarse, &keypoints, &run, &local_run)
     {
         explored_ends.push((coarse.score(mesh, &run.pose), run.pose));
         run = better;
