@@ -202,6 +202,33 @@ fn box_at(centre: Vector3<f64>, size_m: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>
     (vertices, cube.triangles().to_vec())
 }
 
+/// Two 0.2 m boxes overlapping by half along x, the second without its first
+/// `second_triangles_left_out` triangles (0: both closed).
+fn overlapping_boxes(second_triangles_left_out: usize) -> Mesh {
+    let (mut vertices, mut triangles) = box_at(Vector3::zeros(), 0.2);
+    let (second, second_triangles) = box_at(Vector3::new(0.1, 0.0, 0.0), 0.2);
+    let offset = vertices.len() as u32;
+    vertices.extend(second);
+    triangles.extend(
+        second_triangles[second_triangles_left_out..]
+            .iter()
+            .map(|t| t.map(|i| i + offset)),
+    );
+    Mesh::new(&vertices, &triangles).unwrap()
+}
+
+/// Asserts `mesh`'s inside test (deeper than 1 cm) at each query.
+fn assert_inside_1cm(mesh: &Mesh, cases: &[(Point3<f64>, bool)]) {
+    for (query, inside) in cases {
+        let closest = mesh.closest_point(query);
+        assert_eq!(
+            mesh.is_inside_deeper_than(query, &closest, 0.01),
+            *inside,
+            "{query}"
+        );
+    }
+}
+
 #[test]
 fn an_open_mesh_is_inside_where_most_of_its_rays_leave_it() {
     let (vertices, triangles) = box_at(Vector3::zeros(), 0.2);
@@ -238,26 +265,17 @@ fn an_open_mesh_is_inside_where_most_of_its_rays_leave_it() {
 fn a_point_inside_two_overlapping_bodies_is_inside_and_a_sheet_has_no_inside() {
     // Two boxes overlapping by half, one of them open: a ray from their common part leaves
     // both (parity along it would call the point outside).
-    let (mut vertices, mut triangles) = box_at(Vector3::zeros(), 0.2);
-    let (second, second_triangles) = box_at(Vector3::new(0.1, 0.0, 0.0), 0.2);
-    let offset = vertices.len() as u32;
-    vertices.extend(second);
-    triangles.extend(second_triangles[1..].iter().map(|t| t.map(|i| i + offset)));
-    let overlapping = Mesh::new(&vertices, &triangles).unwrap();
+    let overlapping = overlapping_boxes(1);
     assert!(!overlapping.is_watertight());
-    for (query, inside) in [
-        (Point3::new(0.05, 0.0, 0.0), true),
-        (Point3::new(-0.05, 0.0, 0.0), true),
-        (Point3::new(0.15, 0.02, -0.03), true),
-        (Point3::new(0.05, 0.0, 0.2), false),
-    ] {
-        let closest = overlapping.closest_point(&query);
-        assert_eq!(
-            overlapping.is_inside_deeper_than(&query, &closest, 0.01),
-            inside,
-            "{query}"
-        );
-    }
+    assert_inside_1cm(
+        &overlapping,
+        &[
+            (Point3::new(0.05, 0.0, 0.0), true),
+            (Point3::new(-0.05, 0.0, 0.0), true),
+            (Point3::new(0.15, 0.02, -0.03), true),
+            (Point3::new(0.05, 0.0, 0.2), false),
+        ],
+    );
     let sheet = Mesh::new(
         &[
             Point3::new(-0.1, -0.1, 0.0),
@@ -296,19 +314,13 @@ fn a_box_missing_two_faces_is_inside_and_a_channel_is_not() {
     let centre = Point3::origin();
     for (mesh, inside) in [(&two_gone, true), (&channel, false)] {
         assert!(!mesh.is_watertight());
-        let closest = mesh.closest_point(&centre);
-        assert_eq!(mesh.is_inside_deeper_than(&centre, &closest, 0.01), inside);
+        assert_inside_1cm(mesh, &[(centre, inside)]);
     }
 }
 
 #[test]
 fn a_point_where_two_closed_bodies_overlap_is_inside_though_its_closest_face_says_outside() {
-    let (mut vertices, mut triangles) = box_at(Vector3::zeros(), 0.2);
-    let (second, second_triangles) = box_at(Vector3::new(0.1, 0.0, 0.0), 0.2);
-    let offset = vertices.len() as u32;
-    vertices.extend(second);
-    triangles.extend(second_triangles.iter().map(|t| t.map(|i| i + offset)));
-    let two_bodies = Mesh::new(&vertices, &triangles).unwrap();
+    let two_bodies = overlapping_boxes(0);
     assert!(two_bodies.is_watertight());
     assert_eq!(two_bodies.bodies(), 2);
     assert_eq!(Mesh::cuboid([0.2; 3]).unwrap().bodies(), 1);
@@ -317,18 +329,14 @@ fn a_point_where_two_closed_bodies_overlap_is_inside_though_its_closest_face_say
     let query = Point3::new(-0.03, 0.0, 0.0);
     let closest = two_bodies.closest_point(&query);
     assert!(closest.signed_distance > 0.0);
-    assert!(two_bodies.is_inside_deeper_than(&query, &closest, 0.01));
-    for (query, inside) in [
-        (Point3::new(0.05, 0.0, 0.0), true),
-        (Point3::new(0.17, 0.0, 0.0), true),
-        (Point3::new(0.05, 0.0, 0.15), false),
-        (Point3::new(-0.2, 0.0, 0.0), false),
-    ] {
-        let closest = two_bodies.closest_point(&query);
-        assert_eq!(
-            two_bodies.is_inside_deeper_than(&query, &closest, 0.01),
-            inside,
-            "{query}"
-        );
-    }
+    assert_inside_1cm(
+        &two_bodies,
+        &[
+            (query, true),
+            (Point3::new(0.05, 0.0, 0.0), true),
+            (Point3::new(0.17, 0.0, 0.0), true),
+            (Point3::new(0.05, 0.0, 0.15), false),
+            (Point3::new(-0.2, 0.0, 0.0), false),
+        ],
+    );
 }
