@@ -15,9 +15,12 @@
 # Set F, held out until the forty-eighth session: IHMC's Alexander humanoid (every link of its
 # left leg in the wheel, and its pelvis: Blender OBJ files of quads), the double pendulum's base
 # and first link and the Hector quadrotor's frame (790 mm across, 15 bodies).
-# They come from the PyPI wheel example-robot-data 6.0.0 (the wheel the shipped xArm7 and
-# SO-ARM100 meshes came from) and are written, checked by SHA-256, into one folder per robot
-# under OUT (default target/unseen-parts); nothing is copied into the repository.
+# Set G, held out until the forty-ninth session: Kinova's Gen3 arm, Rethink's Sawyer arm and
+# Boston Dynamics' Spot leg and arm link, from another source (robosuite) and other exporters.
+# Sets A-F come from the PyPI wheel example-robot-data 6.0.0 (the wheel the shipped xArm7 and
+# SO-ARM100 meshes came from), set G from the PyPI wheel robosuite 1.5.2. They are written,
+# checked by SHA-256, into one folder per robot under OUT (default target/unseen-parts); nothing
+# is copied into the repository.
 #
 #   bash scripts/unseen-parts.sh [OUT]
 #   target/release/cad-scans --scans 40 --ips local --seed 64 \
@@ -30,33 +33,41 @@
 #    set E: --mesh-dir OUT/tiago --mesh-dir OUT/finger_edu --mesh-dir OUT/allegro_hand
 #           --parts tiago_,finger_edu_,allegro_hand_ --no-peers;
 #    set F: --mesh-dir OUT/alexander --mesh-dir OUT/double_pendulum --mesh-dir OUT/hector
-#           --parts alexander_,double_pendulum_,hector_)
+#           --parts alexander_,double_pendulum_,hector_;
+#    set G: --mesh-dir OUT/kinova3 --mesh-dir OUT/sawyer --mesh-dir OUT/spot
+#           --parts kinova3_,sawyer_,spot_)
 #
 # Licenses, as the wheel's README of each description names them (panda_description also
 # carries its LICENSE file): tiago_pro Apache-2.0, z1 MPL-2.0, panda Apache-2.0, ur BSD,
 # g1 BSD-3-Clause, cassie ISC, talos_data Apache-2.0, pr2 BSD, go2 MPL-2.0, centauro Apache-2.0,
 # solo BSD-3-Clause, bolt BSD-3-Clause, laikago MPL-2.0, tiago Apache-2.0, finger_edu
 # BSD-3-Clause, allegro_hand BSD, alexander Apache-2.0 (its LICENSE file is in the wheel),
-# double_pendulum BSD, hector BSD. They are only read here, never shipped. (The wheel's Alex
-# upper body is CC-BY-NC-ND-4.0 and is left out.)
+# double_pendulum BSD, hector BSD; robosuite (set G) is MIT (its LICENSE file is in the wheel)
+# and ships these robots' meshes as its own assets. They are only read here, never shipped.
+# (The example-robot-data wheel's Alex upper body is CC-BY-NC-ND-4.0 and is left out.)
 # Idempotent: files already in place with the right hash are kept.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT="${1:-target/unseen-parts}"
-WHEEL_VERSION=6.0.0
 DOWNLOADS="target/unseen-parts-wheel"
 mkdir -p "$OUT" "$DOWNLOADS"
-if ! ls "$DOWNLOADS"/example_robot_data-"$WHEEL_VERSION"-*.whl >/dev/null 2>&1; then
-    python3 -m pip download --quiet --disable-pip-version-check --no-deps \
-        "example-robot-data==$WHEEL_VERSION" -d "$DOWNLOADS"
-fi
-WHEEL="$(ls "$DOWNLOADS"/example_robot_data-"$WHEEL_VERSION"-*.whl | head -1)"
-python3 - "$WHEEL" "$OUT" <<'EOF'
+# The wheel of a PyPI distribution, downloaded once: fetch_wheel NAME VERSION
+fetch_wheel() {
+    local file_prefix="${1//-/_}-$2-"
+    if ! ls "$DOWNLOADS"/"$file_prefix"*.whl >/dev/null 2>&1; then
+        python3 -m pip download --quiet --disable-pip-version-check --no-deps \
+            "$1==$2" -d "$DOWNLOADS"
+    fi
+    ls "$DOWNLOADS"/"$file_prefix"*.whl | head -1
+}
+ROBOT_DATA_WHEEL="$(fetch_wheel example-robot-data 6.0.0)"
+ROBOSUITE_WHEEL="$(fetch_wheel robosuite 1.5.2)"
+python3 - "$ROBOT_DATA_WHEEL" "$ROBOSUITE_WHEEL" "$OUT" <<'EOF'
 import hashlib, os, struct, sys, zipfile
 
-wheel, out = sys.argv[1], sys.argv[2]
+robot_data_wheel, robosuite_wheel, out = sys.argv[1], sys.argv[2], sys.argv[3]
 # path in the wheel (after ".../robots/"), file written under OUT, its SHA-256
-PARTS = [
+ROBOT_DATA_PARTS = [
     ("tiago_pro_description/meshes/arm_tiago_pro/arm_1_link.stl", "tiago_pro/arm_1_link.stl",
      "8f3672dbbb71d5ff9a158f687eb4438de0455b8aa73c92e9bb64f6aa50cfcd38"),
     ("tiago_pro_description/meshes/arm_tiago_pro/arm_2_link.stl", "tiago_pro/arm_2_link.stl",
@@ -188,6 +199,30 @@ PARTS = [
     ("hector_description/meshes/quadrotor/quadrotor_base.stl", "hector/quadrotor_base.stl",
      "d2e4f8f6ee307006e687320790263f412d92973a7bf344ad302afb9388866f43"),
 ]
+# Set G, held out: first scanned in the forty-ninth session, on the build of that session's start
+# (0779480), with both peers in one run.
+ROBOSUITE_PARTS = [
+    ("kinova3/meshes/shoulder_link.stl", "kinova3/shoulder_link.stl",
+     "a98e232e5197f09e9cd520e7a450c21bcec74bc49e2a19ce7cf86c5dc25f2e18"),
+    ("kinova3/meshes/half_arm_1_link.stl", "kinova3/half_arm_1_link.stl",
+     "8df461a71780d8e2d09104a507584424279d85173adf14867e359f7e58b3bba7"),
+    ("kinova3/meshes/spherical_wrist_1_link.stl", "kinova3/spherical_wrist_1_link.stl",
+     "0b97a5e3b2de535344f8e8d4176d77f0cdb3455b235f35430fa0413208856e66"),
+    ("sawyer/obj_meshes/l1.obj", "sawyer/l1.obj",
+     "6e551d2b6633fa879fe4d4a69d584922205a44ad1ad9a3899736fcc8ae5d8edc"),
+    ("sawyer/obj_meshes/l2.obj", "sawyer/l2.obj",
+     "974a66e72ae987c1cd7f47fefd4756646e298739a7c879244b2c3ff0533fb19c"),
+    ("sawyer/obj_meshes/l5.obj", "sawyer/l5.obj",
+     "3e0d0f74383ee20bb4dbbab14dc21233a68458d842c7d972c7f68dc27ce55629"),
+    ("spot/meshes/front_left_hip.obj", "spot/front_left_hip.obj",
+     "71caaba7f10e75de7b331d1b1d99f57de6fc8fad0dd436aea09de0e256b88b55"),
+    ("spot/meshes/front_left_upper_leg_1.obj", "spot/front_left_upper_leg.obj",
+     "dba444ac01083909a841a576e5755dab3ba6580c5c2ac1fc870a047fa01bf63d"),
+    ("spot/meshes/front_left_lower_leg.obj", "spot/front_left_lower_leg.obj",
+     "202a07b4226fba77ce28e053de6524b8407d3206309ffafb96828f09c4c34a1d"),
+    ("spot_arm/meshes/arm_link_hr0.obj", "spot/arm_link_hr0.obj",
+     "edfdce679d1d0afac6fc2495f81b29b85c5f36edcb9c66ebcb75843f227f8e89"),
+]
 
 
 def scaled_binary_stl(data, scale):
@@ -204,29 +239,32 @@ def scaled_binary_stl(data, scale):
     return bytes(out)
 
 
-with zipfile.ZipFile(wheel) as archive:
-    names = archive.namelist()
-    for inside, target, sha, *scale in PARTS:
-        path = os.path.join(out, target)
-        if not scale and os.path.exists(path) \
-                and hashlib.sha256(open(path, "rb").read()).hexdigest() == sha:
-            continue
-        found = [n for n in names if n.endswith("/robots/" + inside)]
-        if len(found) != 1:
-            sys.exit(f"unseen-parts: {inside} is not in {wheel} once ({len(found)} matches)")
-        data = archive.read(found[0])
-        if hashlib.sha256(data).hexdigest() != sha:
-            sys.exit(f"unseen-parts: {inside} in {wheel} does not have the expected SHA-256")
-        if scale:
-            data = scaled_binary_stl(data, scale[0])
-            if os.path.exists(path) and open(path, "rb").read() == data:
+for wheel, parts in ((robot_data_wheel, ROBOT_DATA_PARTS), (robosuite_wheel, ROBOSUITE_PARTS)):
+    with zipfile.ZipFile(wheel) as archive:
+        names = archive.namelist()
+        for inside, target, sha, *scale in parts:
+            path = os.path.join(out, target)
+            if not scale and os.path.exists(path) \
+                    and hashlib.sha256(open(path, "rb").read()).hexdigest() == sha:
                 continue
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        with open(path, "wb") as f:
-            f.write(data)
-print(f"unseen-parts: {len(PARTS)} meshes; set A in {out}/tiago_pro, {out}/z1, {out}/panda;"
+            found = [n for n in names if n.endswith("/robots/" + inside)]
+            if len(found) != 1:
+                sys.exit(f"unseen-parts: {inside} is not in {wheel} once ({len(found)} matches)")
+            data = archive.read(found[0])
+            if hashlib.sha256(data).hexdigest() != sha:
+                sys.exit(f"unseen-parts: {inside} in {wheel} does not have the expected SHA-256")
+            if scale:
+                data = scaled_binary_stl(data, scale[0])
+                if os.path.exists(path) and open(path, "rb").read() == data:
+                    continue
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+            with open(path, "wb") as f:
+                f.write(data)
+print(f"unseen-parts: {len(ROBOT_DATA_PARTS) + len(ROBOSUITE_PARTS)} meshes;"
+      f" set A in {out}/tiago_pro, {out}/z1, {out}/panda;"
       f" set B in {out}/ur5, {out}/g1, {out}/cassie; set C in {out}/talos, {out}/pr2, {out}/go2;"
       f" set D in {out}/centauro, {out}/solo12, {out}/bolt, {out}/laikago;"
       f" set E in {out}/tiago, {out}/finger_edu, {out}/allegro_hand;"
-      f" set F in {out}/alexander, {out}/double_pendulum, {out}/hector")
+      f" set F in {out}/alexander, {out}/double_pendulum, {out}/hector;"
+      f" set G in {out}/kinova3, {out}/sawyer, {out}/spot")
 EOF
