@@ -7,7 +7,8 @@
 //! `../shared/data` beside the workspace; the repository does not ship it), the ABB too, in a
 //! scan of about 20k points of it at its trials' joint values (issue 20's 100 ms is for 20k
 //! points at 100 mm, and its robots include the ABB).
-//! Run: cargo bench -p align-core --bench articulated_starts [-- --runs N --starts N]
+//! Run: cargo bench -p align-core --bench articulated_starts [-- --runs N --starts N --only NAME]
+//! (`--only ur10`, `iiwa14` or `abb_irb1600`: that robot alone, as for a profile of one).
 
 use std::time::Instant;
 
@@ -49,7 +50,11 @@ fn main() {
     let runs = argument("--runs", 3).max(1);
     let starts = argument("--starts", 20).max(1);
     let options = RobotFitOptions::default();
+    let only = std::env::args().skip_while(|a| a != "--only").nth(1);
     for (name, home, scene) in scenes() {
+        if only.as_ref().is_some_and(|only| *only != name) {
+            continue;
+        }
         let RobotScene {
             body,
             world_from_root: truth,
