@@ -17,6 +17,7 @@ use parry3d_f64::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
 use super::facing_tree::{Closest, FacingTree, Feature, NearbyTriangles};
 use super::inside_grid::{InsideGrid, count_bodies};
+use super::just_beyond;
 use super::spread::{PrincipalSpread, human_length, implausible_size_warning};
 
 /// A vertex spread (standard deviation) below this fraction of the largest one is no spread at
@@ -403,17 +404,21 @@ impl Mesh {
         hint: Option<u32>,
     ) -> Option<SurfacePoint> {
         let bound_m = hint
-            .filter(|&t| (t as usize) < self.trimesh.indices().len())
-            .map(|t| {
-                let triangle = self.trimesh.triangle(t);
-                let projection = triangle.project_local_point(to_glam(query), false);
-                (from_glam(projection.point) - query.coords).norm()
-            })
-            // A hair beyond it, so that the hint's own triangle is still found.
-            .map_or(max_distance_m, |d| {
-                max_distance_m.min(d * (1.0 + 1e-9) + 1e-12)
-            });
+            .and_then(|t| self.distance_to_triangle_m(query, t))
+            .map_or(max_distance_m, |d| max_distance_m.min(just_beyond(d)));
         self.closest_point_within(query, bound_m)
+    }
+
+    /// The distance from `query` (mesh frame) to triangle `triangle`, or `None` when the mesh
+    /// has no such triangle: an upper bound on the distance to the surface, from one projection.
+    pub fn distance_to_triangle_m(&self, query: &Point3<f64>, triangle: u32) -> Option<f64> {
+        ((triangle as usize) < self.trimesh.indices().len()).then(|| {
+            let projection = self
+                .trimesh
+                .triangle(triangle)
+                .project_local_point(to_glam(query), false);
+            (from_glam(projection.point) - query.coords).norm()
+        })
     }
 
     /// [`Mesh::closest_point_within`], approximate by at most a factor `slack` (>= 1): the point

@@ -15,3 +15,9 @@ pub use mesh::{Mesh, MeshError, SignedClosest, SurfacePoint};
 pub use spread::{
     PLAUSIBLE_PART_SIZE_M, PrincipalSpread, human_length, implausible_size_warning, plane_through,
 };
+
+/// A search bound a hair beyond `distance_m`, so that the triangle at that distance is still
+/// found despite rounding.
+pub(crate) fn just_beyond(distance_m: f64) -> f64 {
+    distance_m * (1.0 + 1e-9) + 1e-12
+}

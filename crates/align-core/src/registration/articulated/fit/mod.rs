@@ -97,6 +97,8 @@ mod global_search;
 mod joint_search;
 mod options;
 mod placed;
+#[cfg(test)]
+mod placed_tests;
 mod refine;
 mod report;
 #[cfg(test)]

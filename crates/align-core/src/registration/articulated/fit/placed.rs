@@ -17,6 +17,26 @@ pub(super) struct Match {
     pub(super) link: usize,
 }
 
+/// The link and triangle a keypoint's exact match lay on at a refinement's previous step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct SurfaceHint {
+    link: u32,
+    triangle: u32,
+}
+
+#[cfg(test)]
+impl SurfaceHint {
+    pub(super) fn of(link: u32, triangle: u32) -> Self {
+        Self { link, triangle }
+    }
+}
+
+/// No triangle remembered (yet, or the last match came from a distance grid).
+pub(super) const NO_HINT: SurfaceHint = SurfaceHint {
+    link: u32::MAX,
+    triangle: u32::MAX,
+};
+
 /// Where [`Placed::closeness`] takes its distances from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Distances {
@@ -74,13 +94,35 @@ impl<'a> Placed<'a> {
 
     /// The nearest surface of `links` within `band` of `point`.
     pub(super) fn nearest(&self, point: &Point3<f64>, band: f64, links: &[usize]) -> Option<Match> {
+        let mut none = NO_HINT;
+        self.nearest_hinted(point, band, links, &mut none)
+    }
+
+    /// [`Placed::nearest`], with the triangle `hint` the same keypoint matched at the previous
+    /// step of a refinement (and set to this one's). An exact query whose hinted triangle lies
+    /// within [`EDGE_REJECTION_M`] bounds every link's search by its distance from the start:
+    /// any closer surface point is accepted wherever it lies, so the answer is the one
+    /// [`Placed::nearest`] gives, and links farther than the hint are ruled out by their
+    /// bounds and grids instead of each opening its tree to the band (a centimetre).
+    pub(super) fn nearest_hinted(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        links: &[usize],
+        hint: &mut SurfaceHint,
+    ) -> Option<Match> {
+        let hinted_m = self.hinted_distance_m(point, links, *hint);
+        *hint = NO_HINT;
+        let start_limit = hinted_m
+            .filter(|&d| d <= EDGE_REJECTION_M)
+            .map_or(band, |d| band.min(crate::geometry::just_beyond(d)));
         let mut best: Option<Match> = None;
         for &link in links {
             let body_link = &self.body.links()[link];
             let Some(surface) = &body_link.surface else {
                 continue;
             };
-            let limit = best.map_or(band, |b| b.distance);
+            let limit = best.map_or(start_limit, |b| b.distance);
             if !self.within_reach(point, link, limit) {
                 continue;
             }
@@ -146,9 +188,29 @@ impl<'a> Placed<'a> {
                     weight: (distance / band * std::f64::consts::FRAC_PI_2).cos(),
                     link,
                 });
+                *hint = SurfaceHint {
+                    link: link as u32,
+                    triangle: closest.triangle,
+                };
             }
         }
         best
+    }
+
+    /// The distance from `point` to the triangle `hint` names, when it is an exact query's and
+    /// its link is among `links`.
+    fn hinted_distance_m(
+        &self,
+        point: &Point3<f64>,
+        links: &[usize],
+        hint: SurfaceHint,
+    ) -> Option<f64> {
+        let link = hint.link as usize;
+        if !self.exact || hint == NO_HINT || !links.contains(&link) {
+            return None;
+        }
+        let surface = self.body.links().get(link)?.surface.as_ref()?;
+        surface.distance_to_triangle_m(&(self.inverse[link] * point), hint.triangle)
     }
 
     /// What `point` says about the links placed here: +1 when it lies on the surface of one of
@@ -356,11 +418,38 @@ pub(super) fn correspond(
     links: &[usize],
     parallel: bool,
 ) -> Vec<Match> {
-    let one = |p: &Point3<f64>| placed.nearest(p, band, links).filter(|m| m.weight > 0.0);
-    if parallel {
-        keypoints.par_iter().filter_map(one).collect()
-    } else {
-        keypoints.iter().filter_map(one).collect()
+    correspond_hinted(placed, keypoints, band, links, parallel, &mut [])
+}
+
+/// [`correspond`], with each keypoint's triangle remembered in `hints` (one per keypoint, or
+/// empty for none) between the steps of a refinement: see [`Placed::nearest_hinted`].
+pub(super) fn correspond_hinted(
+    placed: &Placed,
+    keypoints: &[Point3<f64>],
+    band: f64,
+    links: &[usize],
+    parallel: bool,
+    hints: &mut [SurfaceHint],
+) -> Vec<Match> {
+    let one = |p: &Point3<f64>, hint: &mut SurfaceHint| {
+        placed
+            .nearest_hinted(p, band, links, hint)
+            .filter(|m| m.weight > 0.0)
+    };
+    let unhinted = |p: &Point3<f64>| placed.nearest(p, band, links).filter(|m| m.weight > 0.0);
+    match (parallel, hints.len() == keypoints.len()) {
+        (true, true) => keypoints
+            .par_iter()
+            .zip(hints.par_iter_mut())
+            .filter_map(|(p, hint)| one(p, hint))
+            .collect(),
+        (true, false) => keypoints.par_iter().filter_map(unhinted).collect(),
+        (false, true) => keypoints
+            .iter()
+            .zip(hints.iter_mut())
+            .filter_map(|(p, hint)| one(p, hint))
+            .collect(),
+        (false, false) => keypoints.iter().filter_map(unhinted).collect(),
     }
 }
 

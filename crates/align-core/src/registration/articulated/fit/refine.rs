@@ -3,7 +3,7 @@
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::RobotFitOptions;
-use super::placed::{Match, Placed, correspond, placed_radius};
+use super::placed::{Match, NO_HINT, Placed, correspond_hinted, placed_radius};
 use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
 
 /// Gauss-Newton point-to-plane refinement of the base pose and all joints; returns iterations.
@@ -85,6 +85,13 @@ pub(super) fn refine_links(
     // iterations ends at the state whose points carried the most weight (the robust kernel's
     // objective; a mean residual would favour states that push points out of the band).
     let mut best: Option<(f64, Isometry3<f64>, Vec<f64>)> = None;
+    // Each keypoint's triangle at the previous step bounds its next exact search (the same
+    // matches, fewer tree nodes opened; see `Placed::nearest_hinted`).
+    let mut hints = if exact {
+        vec![NO_HINT; keypoints.len()]
+    } else {
+        Vec::new()
+    };
     while iterations < options.max_iterations {
         let fraction = if shrink_iterations == 0 {
             1.0
@@ -96,7 +103,14 @@ pub(super) fn refine_links(
         iterations += 1;
         let mut placed = Placed::new(body, world_from_root, q);
         placed.exact = exact;
-        let matches = correspond(&placed, keypoints, band, links, options.parallel);
+        let matches = correspond_hinted(
+            &placed,
+            keypoints,
+            band,
+            links,
+            options.parallel,
+            &mut hints,
+        );
         if matches.len() < 6 {
             break;
         }
