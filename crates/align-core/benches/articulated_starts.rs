@@ -3,7 +3,8 @@
 //! settles in three iterations or cycles to its limit), so one start's time says little about
 //! the median over starts. Prints a table per robot: each start's median time over `--runs`
 //! fits, the worst link's surface deviation from the truth, the links more than 1 mm off and the
-//! joints the fit reports the scan does not show, then the median and mean over starts. Where the ABB IRB 1600's support package is (`$ABB_IRB1600_SUPPORT_DIR`, else
+//! joints the fit reports the scan does not show, then the median and mean over starts.
+//! Where the ABB IRB 1600's support package is (`$ABB_IRB1600_SUPPORT_DIR`, else
 //! `../shared/data` beside the workspace; the repository does not ship it), the ABB too, in a
 //! scan of about 20k points of it at its trials' joint values (issue 20's 100 ms is for 20k
 //! points at 100 mm, and its robots include the ABB).
