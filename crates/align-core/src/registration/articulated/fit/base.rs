@@ -33,7 +33,10 @@ impl FitContext<'_> {
             options,
             ..
         } = *self;
-        if options.base_candidates == 0 {
+        // A near start (see `NEAR_DELTA_PER_RADIUS`) never pays for the candidates, nor for the
+        // proximal links' mesh: on the ABB IRB 1600 (7.8k triangles) building it took 6 ms of a
+        // 100 mm fit (a timing probe, docs/BENCHMARKS.md).
+        if options.base_candidates == 0 || near {
             return Vec::new();
         }
         let first = search_order(body).first().copied();
@@ -50,8 +53,8 @@ impl FitContext<'_> {
         // are 0.56 m in radius: at 200 mm the whole robot's alignment left its base 88 mm above
         // the floor in a ray-cast scan (`robot-scans --seed 77`, scene 2 trial 5), the only
         // hypothesis, out of reach of every stage after it. Now the line is a third of the
-        // radius, and a near start (see `NEAR_DELTA_PER_RADIUS`) never pays for the candidates.
-        if near || delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
+        // radius.
+        if delta_m <= PROXIMAL_DELTA_PER_RADIUS * mesh.radius_m() {
             return Vec::new();
         }
         // The root moves by up to about twice delta (the robot turns about its centroid).
