@@ -52,7 +52,18 @@ fn main() {
     let starts = argument("--starts", 20).max(1);
     let options = RobotFitOptions::default();
     let only = std::env::args().skip_while(|a| a != "--only").nth(1);
-    for (name, home, scene) in scenes() {
+    let scenes = scenes();
+    if let Some(only) = &only
+        && scenes.iter().all(|(name, ..)| name != only)
+    {
+        let names: Vec<&str> = scenes.iter().map(|(name, ..)| name.as_str()).collect();
+        eprintln!(
+            "--only {only}: no such robot here (these are: {})",
+            names.join(", ")
+        );
+        std::process::exit(2);
+    }
+    for (name, home, scene) in scenes {
         if only.as_ref().is_some_and(|only| *only != name) {
             continue;
         }
