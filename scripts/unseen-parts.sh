@@ -43,7 +43,8 @@
 # solo BSD-3-Clause, bolt BSD-3-Clause, laikago MPL-2.0, tiago Apache-2.0, finger_edu
 # BSD-3-Clause, allegro_hand BSD, alexander Apache-2.0 (its LICENSE file is in the wheel),
 # double_pendulum BSD, hector BSD; robosuite (set G) is MIT (its LICENSE file is in the wheel)
-# and ships these robots' meshes as its own assets. They are only read here, never shipped.
+# and ships these robots' meshes among its assets; the wheel names no other license for them,
+# and their upstreams' own terms were not checked here. They are only read here, never shipped.
 # (The example-robot-data wheel's Alex upper body is CC-BY-NC-ND-4.0 and is left out.)
 # Idempotent: files already in place with the right hash are kept.
 set -euo pipefail
