@@ -1,9 +1,10 @@
 //! Unit tests of the exact queries bounded by a remembered triangle
 //! ([`super::placed::Placed::nearest_hinted`]).
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use super::placed::{NO_HINT, Placed, SurfaceHint};
+use super::tests::random_surface_point;
 use crate::registration::articulated::ArticulatedBody;
 use crate::robots::ShippedRobot;
 use crate::trials::TrialRng;
@@ -34,15 +35,7 @@ fn a_remembered_triangle_changes_no_exact_answer() {
         let Some(surface) = &body.links()[link].surface else {
             continue;
         };
-        let on = surface.closest_point(&Point3::from(
-            surface.centroid().coords
-                + Vector3::new(
-                    rng.uniform() - 0.5,
-                    rng.uniform() - 0.5,
-                    rng.uniform() - 0.5,
-                ) * surface.radius_m()
-                    * 2.0,
-        ));
+        let on = random_surface_point(surface, &mut rng);
         // Mostly within a millimetre or two (noise), some farther out and some inside.
         let offset = (rng.uniform() - 0.2) * if rng.uniform() < 0.7 { 0.003 } else { 0.02 };
         let point = before.poses[link] * (on.point + on.normal * offset);

@@ -13,6 +13,7 @@ use super::placed::{Distances, Match, Placed, placed_radius};
 use super::refine::normal_equations;
 use super::tree::Window;
 use super::{RobotFitOptions, align_robot};
+use crate::geometry::{Mesh, SurfacePoint};
 use crate::kinematics::{PackageMap, RobotModel};
 use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
 use crate::registration::sampling::voxel_representatives;
@@ -305,6 +306,20 @@ fn the_refinements_stop_measures_a_step_on_the_link_it_moves_most() {
     assert_eq!(equations.largest_link_motion_m(&step, 1e9), 0.0);
 }
 
+/// The closest point of `surface` to a random point of the cube twice its radius about its
+/// centroid: points all over a link, the faces it shows most drawn most often.
+pub(super) fn random_surface_point(surface: &Mesh, rng: &mut TrialRng) -> SurfacePoint {
+    surface.closest_point(&Point3::from(
+        surface.centroid().coords
+            + Vector3::new(
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+            ) * surface.radius_m()
+                * 2.0,
+    ))
+}
+
 #[test]
 fn the_grids_only_rule_links_out_of_exact_queries_and_approximate_the_rest_closely() {
     let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
@@ -324,15 +339,7 @@ fn the_grids_only_rule_links_out_of_exact_queries_and_approximate_the_rest_close
         let Some(surface) = &body.links()[link].surface else {
             continue;
         };
-        let on = surface.closest_point(&Point3::from(
-            surface.centroid().coords
-                + Vector3::new(
-                    rng.uniform() - 0.5,
-                    rng.uniform() - 0.5,
-                    rng.uniform() - 0.5,
-                ) * surface.radius_m()
-                    * 2.0,
-        ));
+        let on = random_surface_point(surface, &mut rng);
         let offset = (rng.uniform() - 0.3) * 0.05;
         let point = with_grids.poses[link] * (on.point + on.normal * offset);
         for band in [0.01, 0.018, 0.036] {
