@@ -7,6 +7,9 @@ use rayon::prelude::*;
 
 use super::Mesh;
 
+/// More than the rounding of a distance of a few metres stored as f32 (2^-24 of it).
+const F32_ROUNDING_M: f64 = 1e-6;
+
 /// Signed distance (negative inside a watertight mesh, unsigned otherwise) at the corners of
 /// cubic cells covering the mesh's bounds plus a margin, interpolated trilinearly between them.
 /// Corners farther than the margin from the surface hold +-margin: the grid answers distances
@@ -119,6 +122,27 @@ impl DistanceGrid {
         Some((value, gradient))
     }
 
+    /// A lower bound on the distance from `local` (mesh frame) to the surface, with no blur:
+    /// the distance is 1-Lipschitz, so it is at least each corner's stored distance less the
+    /// way to that corner (a corner clamped at the margin stores less than its distance, which
+    /// keeps the bound), less the f32 rounding of the stored values. `None` outside the grid,
+    /// where the surface is farther than the margin. Beside the interpolated value's cell
+    /// diagonal of slack, it rules out a surface a few millimetres nearer the point.
+    pub fn distance_lower_bound_m(&self, local: &Point3<f64>) -> Option<f64> {
+        let (corners, [fx, fy, fz]) = self.cell_of(local)?;
+        let mut bound = f64::NEG_INFINITY;
+        for (corner, value) in corners.iter().enumerate() {
+            // x slowest, z fastest, as `cell_of` orders them.
+            let offset = Vector3::new(
+                fx - (corner >> 2) as f64,
+                fy - ((corner >> 1) & 1) as f64,
+                fz - (corner & 1) as f64,
+            );
+            bound = bound.max(value.abs() - offset.norm() * self.cell_m);
+        }
+        Some(bound - F32_ROUNDING_M)
+    }
+
     /// The eight corner values of the cell holding `local` (x slowest, z fastest) and the
     /// position inside it, each in [0, 1].
     fn cell_of(&self, local: &Point3<f64>) -> Option<([f64; 8], [f64; 3])> {
@@ -189,6 +213,36 @@ mod tests {
         // Flat faces are exact; the blur is where the field bends, near edges and corners.
         assert!(worst < 0.0025, "worst {worst}");
         assert!(grid.reliable_m() > 0.02);
+    }
+
+    #[test]
+    fn the_lower_bound_never_exceeds_the_distance_and_is_tighter_than_a_cell_diagonal() {
+        let cube = Mesh::cuboid([0.2, 0.1, 0.3]).unwrap();
+        let grid = DistanceGrid::new(&cube, 0.005, 0.03);
+        let mut rng = crate::trials::TrialRng::new(17);
+        let (mut gap_sum, mut counted) = (0.0, 0);
+        for _ in 0..20_000 {
+            let p = Point3::new(
+                (rng.uniform() - 0.5) * 0.3,
+                (rng.uniform() - 0.5) * 0.2,
+                (rng.uniform() - 0.5) * 0.4,
+            );
+            let exact = cube.closest_point(&p).signed_distance.abs();
+            match grid.distance_lower_bound_m(&p) {
+                Some(lower) => {
+                    assert!(lower <= exact, "{p}: bound {lower} over {exact}");
+                    if exact < grid.reliable_m() {
+                        gap_sum += exact - lower;
+                        counted += 1;
+                    }
+                }
+                None => assert!(exact > 0.03, "{p}: outside the grid at {exact}"),
+            }
+        }
+        // The interpolated value's guarantee is a cell diagonal (8.7 mm); the bound is
+        // within a few millimetres on average.
+        let mean_gap = gap_sum / counted as f64;
+        assert!(counted > 5000 && mean_gap < 0.004, "{counted} {mean_gap}");
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Link surfaces placed in the world and the point queries every stage scores and refines with.
 
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Unit, Vector3};
 use rayon::prelude::*;
 
 use crate::geometry::Mesh;
@@ -129,9 +129,8 @@ impl<'a> Placed<'a> {
             let local = self.inverse[link] * point;
             if let Some(grid) = &body_link.grid {
                 let reliable = grid.reliable_m();
-                let value = grid.distance_and_gradient(&local);
                 if !self.exact {
-                    match value {
+                    match grid.distance_and_gradient(&local) {
                         Some((signed, gradient)) if signed.abs() < reliable => {
                             let distance = signed.abs();
                             if let (true, Some(normal)) =
@@ -154,12 +153,13 @@ impl<'a> Placed<'a> {
                         _ => {}
                     }
                 } else if limit <= reliable {
-                    // The grid's value is within a cell diagonal of the true distance (a
-                    // distance field changes by at most the distance moved) while that is
-                    // within the margin: beyond that it rules the link out without the
-                    // exact query.
-                    let slack = grid.cell_m() * 3f64.sqrt();
-                    if value.is_none_or(|(signed, _)| signed.abs() > limit + slack) {
+                    // A link the grid puts farther than the limit, without blur, is ruled out
+                    // without the exact query (see `DistanceGrid::distance_lower_bound_m`;
+                    // outside the grid it is farther than the margin).
+                    if grid
+                        .distance_lower_bound_m(&local)
+                        .is_none_or(|lower| lower > limit)
+                    {
                         continue;
                     }
                 }
@@ -463,6 +463,48 @@ pub(super) fn reach_m(placed: &Placed, links: &[usize], origin: &Point3<f64>) ->
             Some((centre - origin).norm() + surface.radius_m())
         })
         .fold(0.0, f64::max)
+}
+
+/// The points of `sample` that some surface of `links`, as `placed`, reaches within `band` when
+/// turned by any angle about the axis through `origin` along `direction`: those within `band`
+/// of the ring each link's bounding sphere sweeps. Every other point is beyond the band of
+/// those links' spheres at every turn ([`Placed::within_reach`]) and counts 0 for them, so a
+/// score of turns over these points is the score over `sample`, to the point.
+pub(super) fn within_swept_reach(
+    placed: &Placed,
+    sample: &[Point3<f64>],
+    links: &[usize],
+    origin: &Point3<f64>,
+    direction: &Unit<Vector3<f64>>,
+    band: f64,
+) -> Vec<Point3<f64>> {
+    // Each sphere's centre as (height along the axis, distance from it), with its reach.
+    let rings: Vec<(f64, f64, f64)> = links
+        .iter()
+        .filter_map(|&link| {
+            let (centre, radius) = placed.spheres[link]?;
+            let (height, distance) = axial_and_radial(&(centre - origin), direction);
+            // A nanometre over: the turned states' spheres are placed by their own rounding.
+            Some((height, distance, radius + band + 1e-9))
+        })
+        .collect();
+    sample
+        .iter()
+        .filter(|p| {
+            let (height, distance) = axial_and_radial(&(*p - origin), direction);
+            rings.iter().any(|&(ring_height, ring_distance, reach)| {
+                let (dh, dr) = (height - ring_height, distance - ring_distance);
+                dh * dh + dr * dr <= reach * reach
+            })
+        })
+        .copied()
+        .collect()
+}
+
+/// `offset`'s component along `direction` and its distance from the line along it.
+fn axial_and_radial(offset: &Vector3<f64>, direction: &Unit<Vector3<f64>>) -> (f64, f64) {
+    let along = offset.dot(direction);
+    (along, (offset - direction.as_ref() * along).norm())
 }
 
 /// How well `links` explain `sample`: points within `band` of their surfaces count +1, points

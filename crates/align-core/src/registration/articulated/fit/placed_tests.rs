@@ -1,9 +1,10 @@
 //! Unit tests of the exact queries bounded by a remembered triangle
-//! ([`super::placed::Placed::nearest_hinted`]).
+//! ([`super::placed::Placed::nearest_hinted`]) and of the points a turn of the base can reach
+//! ([`super::placed::within_swept_reach`]).
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
-use super::placed::{NO_HINT, Placed, SurfaceHint};
+use super::placed::{NO_HINT, Placed, SurfaceHint, coverage, within_swept_reach};
 use super::tests::random_surface_point;
 use crate::registration::articulated::ArticulatedBody;
 use crate::robots::ShippedRobot;
@@ -69,4 +70,64 @@ fn a_remembered_triangle_changes_no_exact_answer() {
     // The bound is used: most points carried a hint, and many lie within its millimetre.
     assert!(hinted > 6000, "{hinted}");
     assert!(tight > 2000, "{tight}");
+}
+
+/// The base-turn check scores turns of the links fixed to the root on the keypoints those links
+/// can reach at some turn: every turn's score over them must be its score over all keypoints.
+/// Points on and near every link of the UR10 (most beyond the base's reach) and scattered in
+/// its box, turns of any size about a tilted axis beside the base, both bands the check uses.
+#[test]
+fn the_points_a_turn_can_reach_score_every_turn_as_all_points_do() {
+    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+    let base = Isometry3::from_parts(
+        Translation3::new(0.3, -0.2, 0.05),
+        UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.03, 0.4)),
+    );
+    let q = ShippedRobot::Ur10.home();
+    let placed = Placed::new(&body, &base, &q);
+    let fixed: Vec<usize> = (0..body.links().len())
+        .filter(|&l| body.movers(l).is_empty() && body.links()[l].surface.is_some())
+        .collect();
+    assert!(!fixed.is_empty());
+    let mut rng = TrialRng::new(29);
+    let mut sample = Vec::new();
+    for _ in 0..4000 {
+        let link = (rng.uniform() * body.links().len() as f64) as usize;
+        let Some(surface) = &body.links()[link].surface else {
+            continue;
+        };
+        let on = random_surface_point(surface, &mut rng);
+        let offset = (rng.uniform() - 0.3) * 0.03;
+        sample.push(placed.poses[link] * (on.point + on.normal * offset));
+    }
+    for _ in 0..1000 {
+        let box_point = Vector3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform());
+        sample.push(base * Point3::from(box_point * 1.5));
+    }
+    let origin = base * Point3::new(0.01, -0.02, 0.0);
+    let direction = Unit::new_normalize(base.rotation * Vector3::new(0.05, 0.02, 1.0));
+    let voxel = 0.006;
+    let reachable = within_swept_reach(&placed, &sample, &fixed, &origin, &direction, 3.0 * voxel);
+    // The base is a small part of the robot: most points are left out.
+    assert!(
+        reachable.len() * 3 < sample.len(),
+        "{} of {}",
+        reachable.len(),
+        sample.len()
+    );
+    let about = Translation3::from(origin.coords);
+    let mut counted = 0;
+    for _ in 0..30 {
+        let theta = (rng.uniform() - 0.5) * 2.0 * std::f64::consts::PI;
+        let turn = about * UnitQuaternion::from_axis_angle(&direction, theta) * about.inverse();
+        let turned = turn * base;
+        for band in [voxel, 3.0 * voxel] {
+            let all = coverage(&body, &sample, &turned, &q, &fixed, band, false);
+            let some = coverage(&body, &reachable, &turned, &q, &fixed, band, false);
+            assert_eq!(some, all, "turn {theta} band {band}");
+            counted += all.abs();
+        }
+    }
+    // The turns are scored on points the base explains or buries, not on none.
+    assert!(counted > 1000, "{counted}");
 }
