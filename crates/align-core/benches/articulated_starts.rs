@@ -7,9 +7,13 @@
 //! Where the ABB IRB 1600's support package is (`$ABB_IRB1600_SUPPORT_DIR`, else
 //! `../shared/data` beside the workspace; the repository does not ship it), the ABB too, in a
 //! scan of about 20k points of it at its trials' joint values (issue 20's 100 ms is for 20k
-//! points at 100 mm, and its robots include the ABB).
+//! points at 100 mm, and its robots include the ABB). Where `scripts/robot-descriptions.sh` has
+//! written it (`$EXAMPLE_ROBOT_DATA_DIR`), the UR10 with its CAD collision meshes too
+//! (`ur10_cad`), at the shipped UR10's home: the shipped robots' links are primitives of
+//! 256-512 triangles, the CAD UR10's 366-1224 and the ABB's 1096-6345.
 //! Run: cargo bench -p align-core --bench articulated_starts [-- --runs N --starts N --only NAME]
-//! (`--only ur10`, `iiwa14` or `abb_irb1600`: that robot alone, as for a profile of one).
+//! (`--only ur10`, `iiwa14`, `abb_irb1600` or `ur10_cad`: that robot alone, as for a profile of
+//! one).
 
 use std::time::Instant;
 
@@ -25,6 +29,9 @@ use robot_scene::{RobotScene, robot_scene, trial_root_pose};
 #[path = "../tests/common/abb.rs"]
 mod abb;
 use abb::{ABB_TRIAL_HOME, abb_irb1600};
+#[path = "../tests/common/ur10_cad.rs"]
+mod ur10_cad;
+use ur10_cad::ur10_cad;
 
 fn argument(name: &str, default: usize) -> usize {
     let args: Vec<String> = std::env::args().collect();
@@ -146,17 +153,24 @@ fn names_or_none<'a>(names: impl Iterator<Item = &'a str>) -> String {
 }
 
 /// The robots fitted, each with the joint values it is scanned at: the shipped UR10 and iiwa14
-/// at home, and the ABB IRB 1600 at its trials' joint values where its package is.
+/// at home, the ABB IRB 1600 at its trials' joint values where its package is, and the CAD
+/// UR10 at the shipped UR10's home where its description is.
 fn scenes() -> Vec<(String, Vec<f64>, RobotScene)> {
     let mut scenes: Vec<(String, Vec<f64>, RobotScene)> =
         [ShippedRobot::Ur10, ShippedRobot::Iiwa14]
             .into_iter()
             .map(|robot| (robot.name().to_owned(), robot.home(), robot_scene(robot)))
             .collect();
-    if let Some(body) = abb_irb1600() {
+    let third_party = [
+        (abb_irb1600(), "abb_irb1600", ABB_TRIAL_HOME.to_vec()),
+        (ur10_cad(), "ur10_cad", ShippedRobot::Ur10.home()),
+    ];
+    for (body, name, home) in third_party {
+        let Some(body) = body else {
+            continue;
+        };
         let world_from_root = trial_root_pose();
-        let home = ABB_TRIAL_HOME.to_vec();
-        // The shipped robots' scene (see `robot_scene`), at the trials' joint values.
+        // The shipped robots' scene (see `robot_scene`), at these joint values.
         let cloud = scan_robot_of_about(
             &body,
             &world_from_root,
@@ -165,7 +179,7 @@ fn scenes() -> Vec<(String, Vec<f64>, RobotScene)> {
             20_000,
         );
         scenes.push((
-            "abb_irb1600".to_owned(),
+            name.to_owned(),
             home,
             RobotScene {
                 body,
