@@ -523,8 +523,9 @@ pub(super) fn coverage(
 }
 
 /// [`coverage`] of the robot as `placed`, where the points `on_floor` marks (by index into
-/// `sample`; unmarked beyond its length) never count for the root link, only against it. A
-/// base stands on the floor and hides the floor under it; set down on the floor beside its
+/// `sample`; unmarked beyond its length) never count for the base (the links no joint moves:
+/// the root link, and the links fixed to it, as a URDF's base_link fixed to a `world` link
+/// without geometry), only against it. A base stands on the floor and hides the floor under it; set down on the floor beside its
 /// place, its underside explains the floor there as well as it explains its own points: the
 /// ABB IRB 1600's base set down 0.33 m from its place, turned, covered 87 floor keypoints of a
 /// beam's 3000 and 27 others, against 97 others (and 9 of the floor) where it stands, and the
@@ -540,13 +541,14 @@ pub(super) fn coverage_beside_floor(
     band: f64,
     parallel: bool,
 ) -> i64 {
-    let root = placed.body.root();
-    let above_root: Vec<usize> = links.iter().copied().filter(|&l| l != root).collect();
-    let with_root = above_root.len() < links.len();
+    let (base, above_base): (Vec<usize>, Vec<usize>) = links
+        .iter()
+        .partition(|&&l| placed.body.movers(l).is_empty());
+    let with_base = !base.is_empty();
     let one = |(index, p): (usize, &Point3<f64>)| {
-        if with_root && on_floor.get(index).copied().unwrap_or(false) {
-            match placed.evidence(p, band, band, &above_root) {
-                0 => placed.evidence(p, band, band, &[root]).min(0),
+        if with_base && on_floor.get(index).copied().unwrap_or(false) {
+            match placed.evidence(p, band, band, &above_base) {
+                0 => placed.evidence(p, band, band, &base).min(0),
                 evidence => evidence,
             }
         } else {

@@ -24,7 +24,7 @@ use crate::trials::{TrialRng, random_displacement};
 /// A robot of primitives whose wrist turns between the two plates of its forearm's fork, a
 /// millimetre from each (as an industrial robot's wrist sits in its forearm), with a flange
 /// of 20 mm radius beyond it.
-const FORKED_WRIST_URDF: &str = r#"<robot name="forked_wrist">
+pub(super) const FORKED_WRIST_URDF: &str = r#"<robot name="forked_wrist">
   <link name="base"><visual><origin xyz="0 0 0.15"/><geometry><box size="0.4 0.4 0.3"/></geometry></visual></link>
   <link name="column"><visual><origin xyz="0.05 0 0.1"/><geometry><box size="0.3 0.25 0.2"/></geometry></visual></link>
   <link name="upper_arm"><visual><origin xyz="0 0 0.3"/><geometry><box size="0.1 0.12 0.6"/></geometry></visual></link>
