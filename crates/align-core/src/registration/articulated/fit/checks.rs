@@ -414,8 +414,8 @@ impl FitContext<'_> {
             Some((turn * *world_from_root, trial_q))
         };
         // Only the keypoints the fixed links can reach at some turn can count for or against
-        // any turn: on the ABB IRB 1600 in a 20k-point scan, about a fifth of them. The widest
-        // band any turn is scored in is the coarse one.
+        // any turn: on the ABB IRB 1600 in a 20k-point scan, 7 065 of 15 529 (a probe, not
+        // kept). The widest band any turn is scored in is the coarse one.
         let coarse_band = 3.0 * options.voxel_m;
         let reachable = within_swept_reach(
             &placed,

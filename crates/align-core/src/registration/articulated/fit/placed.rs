@@ -525,14 +525,14 @@ pub(super) fn coverage(
 /// [`coverage`] of the robot as `placed`, where the points `on_floor` marks (by index into
 /// `sample`; unmarked beyond its length) never count for the base (the links no joint moves:
 /// the root link, and the links fixed to it, as a URDF's base_link fixed to a `world` link
-/// without geometry), only against it. A base stands on the floor and hides the floor under it; set down on the floor beside its
-/// place, its underside explains the floor there as well as it explains its own points: the
-/// ABB IRB 1600's base set down 0.33 m from its place, turned, covered 87 floor keypoints of a
-/// beam's 3000 and 27 others, against 97 others (and 9 of the floor) where it stands, and the
-/// beam kept the wrong place (`robot-scans` seed 91 scene 0 at 500 mm,
-/// docs/articulated-trials.md). The other links keep the floor's points: the beam's scores of a
-/// UR10 wrist near its place weigh too few points to lose those (an own-scan trial at 500 mm
-/// lost its wrist when no link counted them).
+/// without geometry), only against it. A base stands on the floor and hides the floor under
+/// it; set down on the floor beside its place, its underside explains the floor there as well
+/// as it explains its own points: the ABB IRB 1600's base set down 0.33 m from its place,
+/// turned, covered 87 floor keypoints of a beam's 3000 and 27 others, against 97 others (and
+/// 9 of the floor) where it stands, and the beam kept the wrong place (`robot-scans` seed 91
+/// scene 0 at 500 mm, docs/articulated-trials.md). The other links keep the floor's points:
+/// the beam's scores of a UR10 wrist near its place weigh too few points to lose those (an
+/// own-scan trial at 500 mm lost its wrist when no link counted them).
 pub(super) fn coverage_beside_floor(
     placed: &Placed,
     sample: &[Point3<f64>],
