@@ -28,6 +28,8 @@ mod robot_scene;
 use robot_scene::{RobotScene, robot_scene, trial_root_pose};
 #[path = "../tests/common/abb.rs"]
 mod abb;
+#[path = "../tests/common/robot_package.rs"]
+mod robot_package;
 use abb::{ABB_TRIAL_HOME, abb_irb1600};
 #[path = "../tests/common/ur10_cad.rs"]
 mod ur10_cad;

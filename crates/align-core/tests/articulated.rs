@@ -14,6 +14,8 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 #[path = "common/abb.rs"]
 mod abb;
+#[path = "common/robot_package.rs"]
+mod robot_package;
 use abb::{ABB_TRIAL_HOME, abb_irb1600};
 
 fn cell_pose() -> Isometry3<f64> {

@@ -10,6 +10,8 @@ use cad_scans::scanner::ScanNoise;
 // The ABB's loader and trial joints, shared with align-core's articulated tests.
 #[path = "../../align-core/tests/common/abb.rs"]
 mod abb;
+#[path = "../../align-core/tests/common/robot_package.rs"]
+mod robot_package;
 use abb::{ABB_TRIAL_HOME, abb_irb1600};
 
 /// `robot-scans`'s defaults: seed 20, joints drawn up to 0.5 rad about home.

@@ -4,28 +4,20 @@
 //! `target/robot-descriptions/example-robot-data` in the workspace) says where. The shipped
 //! UR10 is drawn from primitives; this one's links are the manufacturer's shapes.
 
-use align_core::kinematics::{PackageMap, RobotModel};
 use align_core::registration::articulated::ArticulatedBody;
+
+// The includer declares `robot_package` (robot_package.rs) beside this module.
+use super::robot_package::robot_from_package;
 
 /// The UR10 with CAD links prepared for fitting, where the description is; `None` (and a line
 /// on stderr saying so) where it is not.
 pub fn ur10_cad() -> Option<ArticulatedBody> {
-    let dir = std::env::var_os("EXAMPLE_ROBOT_DATA_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../target/robot-descriptions/example-robot-data")
-        });
-    let urdf = dir.join("robots/ur_description/urdf/ur10_collision.urdf");
-    if !urdf.is_file() {
-        eprintln!(
-            "skipped: the UR10's CAD description is not here (scripts/robot-descriptions.sh, \
-             EXAMPLE_ROBOT_DATA_DIR)"
-        );
-        return None;
-    }
-    let mut packages = PackageMap::new();
-    packages.insert("example-robot-data".to_owned(), dir);
-    let model = RobotModel::from_urdf_file(&urdf, &packages).expect("the UR10 URDF loads");
-    Some(ArticulatedBody::from_model(&model).expect("the UR10 has surfaces"))
+    robot_from_package(
+        "EXAMPLE_ROBOT_DATA_DIR",
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../target/robot-descriptions/example-robot-data"),
+        "robots/ur_description/urdf/ur10_collision.urdf",
+        "example-robot-data",
+        "scripts/robot-descriptions.sh writes it",
+    )
 }

@@ -3,7 +3,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use super::placed::{Placed, coverage_beside_floor};
-use super::tests::{FORKED_WRIST_URDF, forked_wrist_and_its_base};
+use super::tests::{FORKED_WRIST_URDF, forked_wrist_and_its_base, link_named};
 use crate::kinematics::{PackageMap, RobotModel};
 use crate::registration::articulated::ArticulatedBody;
 
@@ -34,9 +34,7 @@ fn a_base_side_and_the_floor_round_it() -> (Vec<Point3<f64>>, Vec<bool>) {
 #[test]
 fn the_floor_under_a_base_set_down_elsewhere_does_not_count_for_it() {
     let (body, base) = forked_wrist_and_its_base();
-    let column = (0..body.links().len())
-        .find(|&l| body.links()[l].name == "column")
-        .unwrap();
+    let column = link_named(&body, "column");
     let q = [0.0; 6];
     let band = 0.015;
     // The base (a 0.4 m box from z = 0 to 0.3) stands at the origin; the scan shows one of its
@@ -82,14 +80,10 @@ fn a_base_fixed_to_a_world_link_is_the_base_the_floor_does_not_count_for() {
     );
     let model = RobotModel::from_urdf_str(&in_world, &PackageMap::new()).unwrap();
     let rooted = ArticulatedBody::from_model(&model).unwrap();
-    let world = (0..rooted.links().len())
-        .find(|&l| rooted.links()[l].name == "world")
-        .unwrap();
+    let world = link_named(&rooted, "world");
     assert_eq!(rooted.root(), world);
     assert!(rooted.links()[world].surface.is_none());
-    let rooted_base = (0..rooted.links().len())
-        .find(|&l| rooted.links()[l].name == "base")
-        .unwrap();
+    let rooted_base = link_named(&rooted, "base");
     let (sample, on_floor) = a_base_side_and_the_floor_round_it();
     let q = [0.0; 6];
     let elsewhere = Isometry3::translation(0.6, 0.3, 0.0);

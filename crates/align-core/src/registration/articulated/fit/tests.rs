@@ -607,10 +607,15 @@ fn a_point_outside_the_swept_tubes_counts_nothing_at_any_value() {
 pub(super) fn forked_wrist_and_its_base() -> (ArticulatedBody, usize) {
     let model = RobotModel::from_urdf_str(FORKED_WRIST_URDF, &PackageMap::new()).unwrap();
     let body = ArticulatedBody::from_model(&model).unwrap();
-    let base = (0..body.links().len())
-        .find(|&l| body.links()[l].name == "base")
-        .unwrap();
+    let base = link_named(&body, "base");
     (body, base)
+}
+
+/// The index of `body`'s link called `name` (the test's own robot has it).
+pub(super) fn link_named(body: &ArticulatedBody, name: &str) -> usize {
+    (0..body.links().len())
+        .find(|&l| body.links()[l].name == name)
+        .unwrap_or_else(|| panic!("no link '{name}'"))
 }
 
 #[test]
@@ -726,9 +731,7 @@ fn the_sweeps_fine_pass_searches_about_the_highest_distinct_peaks_once_each() {
 #[test]
 fn links_placed_apart_are_those_some_sampled_vertex_deviates_beyond_the_bound() {
     let (body, base) = forked_wrist_and_its_base();
-    let flange = (0..body.links().len())
-        .find(|&l| body.links()[l].name == "flange")
-        .unwrap();
+    let flange = link_named(&body, "flange");
     let bound_m = 1e-3;
     let mut rng = TrialRng::new(41);
     let mut answers = [0usize; 2];
