@@ -1,6 +1,7 @@
 //! The hierarchical robot fit on whole robots in ray-cast scans (`robot-scans`): the shipped
 //! UR10 always, the ABB IRB 1600 where its support package is (the repository does not ship
-//! it: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder).
+//! it: `$ABB_IRB1600_SUPPORT_DIR`, else the workspace's sibling `shared/data` folder), the UR10
+//! with CAD links where `scripts/robot-descriptions.sh` wrote it (`$EXAMPLE_ROBOT_DATA_DIR`).
 
 use align_core::registration::articulated::ArticulatedBody;
 use align_core::robots::ShippedRobot;
@@ -12,7 +13,10 @@ use cad_scans::scanner::ScanNoise;
 mod abb;
 #[path = "../../align-core/tests/common/robot_package.rs"]
 mod robot_package;
+#[path = "../../align-core/tests/common/ur10_cad.rs"]
+mod ur10_cad;
 use abb::{ABB_TRIAL_HOME, abb_irb1600};
+use ur10_cad::ur10_cad;
 
 /// `robot-scans`'s defaults: seed 20, joints drawn up to 0.5 rad about home.
 const SEED: u64 = 20;
@@ -321,4 +325,17 @@ fn each_joints_95_percent_interval_holds_its_truth_in_ray_cast_scans() {
             "{name}: {inside} of {counted}: {outside:?}"
         );
     }
+}
+
+/// The UR10 with CAD links at home (scene 0), in a scan that is mostly floor (2 658 of the
+/// beam's 2 802 keypoints), lost its base in every trial at 200 mm: the beam ranked only states
+/// lying on their side, whose links' undersides explained more of the floor than the robot's
+/// own points (a probe, not kept). The floor's points now count for a link above the base only
+/// where its surface faces up, as a scanner above sees it.
+#[test]
+fn the_cad_ur10_lying_on_the_floor_is_not_taken_for_it() {
+    let Some(body) = ur10_cad() else {
+        return;
+    };
+    no_link_fails(&body, &ShippedRobot::Ur10.home(), 0, 0.2, &[0, 5]);
 }

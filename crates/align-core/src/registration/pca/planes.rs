@@ -94,7 +94,8 @@ pub fn without_floor_under(
 /// The floor under the scan, as [`without_floor_under`] finds it (a point on it and its unit
 /// normal): the plane holding the most of `coarse` (keypoints one per voxel of `voxel_m`), when
 /// it holds more than [`LARGER_THAN_PART`] times the largest flat face of `mesh` could and
-/// nearly all the scan lies on one side of it. `None` when no plane is such a floor.
+/// nearly all the scan lies on one side of it. The normal points to that side, where what
+/// stands on the floor and the scanner are. `None` when no plane is such a floor.
 pub fn floor_plane(
     coarse: &[Point3<f64>],
     mesh: &Mesh,
@@ -122,8 +123,9 @@ pub fn floor_plane(
         }
     }
     let beyond = above.min(below) as f64;
+    let up = if above >= below { normal } else { -normal };
     ((on as f64) > most_keypoints && beyond <= BEYOND_FLOOR * (above + below) as f64)
-        .then_some(plane)
+        .then_some((origin, up))
 }
 
 /// The share of a scan's points off the floor allowed on its far side: stray returns and
@@ -325,10 +327,16 @@ mod tests {
             floor_and_cube
         );
         let (origin, normal) = floor_plane(&points, &part, 0.015).expect("a floor");
+        // Up, towards the cube standing on it.
         assert!(
-            normal.z.abs() > 1.0 - 1e-6 && origin.z.abs() < 1e-9,
+            normal.z > 1.0 - 1e-6 && origin.z.abs() < 1e-9,
             "{origin} {normal}"
         );
+        // The same scan upside down: the normal still points to the cube.
+        let flipped: Vec<Point3<f64>> =
+            points.iter().map(|p| Point3::new(p.x, p.y, -p.z)).collect();
+        let (_, normal) = floor_plane(&flipped, &part, 0.015).expect("a floor");
+        assert!(normal.z < -1.0 + 1e-6, "{normal}");
         assert_eq!(without_floor_under(points, &part, 0.015), cube);
     }
 

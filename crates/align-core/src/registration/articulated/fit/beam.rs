@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::RobotFitOptions;
 use super::context::FitContext;
 use super::joint_search::Candidate;
-use super::placed::{Placed, coverage_beside_floor};
+use super::placed::{FloorMarks, Placed, coverage_beside_floor};
 use super::refine::{Refinement, SETTLE_DAMPING, refine, refine_links};
 use super::tree::{Window, search_order};
 use crate::registration::articulated::body::ArticulatedBody;
@@ -111,13 +111,17 @@ impl FitContext<'_> {
             None => Vec::new(),
         };
         // The states are ranked on what their links explain, the floor's points never counting
-        // for the base (see `coverage_beside_floor`; no floor is marked from a near or global
-        // start).
+        // for the base and only where the other links face up (see `coverage_beside_floor`; no
+        // floor is marked from a near or global start).
+        let floor_marks = floor.map(|(_, up)| FloorMarks {
+            on_floor: &on_floor,
+            up,
+        });
         let score = |base: &Isometry3<f64>, q: &[f64], links: &[usize]| {
             coverage_beside_floor(
                 &Placed::new(body, base, q),
                 &sample,
-                &on_floor,
+                floor_marks,
                 links,
                 band,
                 options.parallel,

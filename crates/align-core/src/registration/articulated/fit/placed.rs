@@ -224,6 +224,23 @@ impl<'a> Placed<'a> {
         inside_m: f64,
         links: &[usize],
     ) -> i64 {
+        self.evidence_seen_from(point, band, inside_m, links, None)
+    }
+
+    /// [`Self::evidence`] of a point seen from the side `up` points to (a unit vector in the
+    /// world; the floor's points, which a scanner sees from above): it lies on a link's surface
+    /// only where that surface faces that side. A link lying on the floor touches it with its
+    /// underside, which faces the floor: the floor's points there are not its own, though they
+    /// lie within the band of it, and a scanner above cannot see that underside at all. `None`
+    /// accepts every side, as [`Self::evidence`] does.
+    pub(super) fn evidence_seen_from(
+        &self,
+        point: &Point3<f64>,
+        band: f64,
+        inside_m: f64,
+        links: &[usize],
+        up: Option<&Vector3<f64>>,
+    ) -> i64 {
         let mut buried = false;
         for &link in links {
             let body_link = &self.body.links()[link];
@@ -235,6 +252,8 @@ impl<'a> Placed<'a> {
                 continue;
             }
             let local = self.inverse[link] * point;
+            let up_local = up.map(|up| self.inverse[link].rotation * up);
+            let faces = |outward: &Vector3<f64>| up_local.is_none_or(|up| outward.dot(&up) > 0.0);
             if let Some(grid) = body_link
                 .grid
                 .as_ref()
@@ -242,7 +261,13 @@ impl<'a> Placed<'a> {
             {
                 match grid.signed_distance_m(&local) {
                     Some(distance) if distance > band => {}
-                    Some(distance) if distance >= -inside_m => return 1,
+                    Some(distance) if distance >= -inside_m => {
+                        // The interpolant's gradient points outward, away from the surface.
+                        let outward = || grid.distance_and_gradient(&local).map(|(_, g)| g);
+                        if up_local.is_none() || outward().is_some_and(|g| faces(&g)) {
+                            return 1;
+                        }
+                    }
                     Some(_) => buried = true,
                     None => {}
                 }
@@ -253,7 +278,11 @@ impl<'a> Placed<'a> {
                 continue;
             }
             match surface.closest_point_within(&local, band) {
-                Some(closest) if closest.signed_distance >= -inside_m => return 1,
+                Some(closest) if closest.signed_distance >= -inside_m => {
+                    if faces(&closest.normal) {
+                        return 1;
+                    }
+                }
                 Some(_) => buried = true,
                 None => buried |= deep_inside(surface, &local, inside_m),
             }
@@ -519,24 +548,38 @@ pub(super) fn coverage(
     parallel: bool,
 ) -> i64 {
     let placed = Placed::new(body, world_from_root, q);
-    coverage_beside_floor(&placed, sample, &[], links, band, parallel)
+    coverage_beside_floor(&placed, sample, None, links, band, parallel)
 }
 
-/// [`coverage`] of the robot as `placed`, where the points `on_floor` marks (by index into
-/// `sample`; unmarked beyond its length) never count for the base (the links no joint moves:
-/// the root link, and the links fixed to it, as a URDF's base_link fixed to a `world` link
-/// without geometry), only against it. A base stands on the floor and hides the floor under
-/// it; set down on the floor beside its place, its underside explains the floor there as well
-/// as it explains its own points: the ABB IRB 1600's base set down 0.33 m from its place,
-/// turned, covered 87 floor keypoints of a beam's 3000 and 27 others, against 97 others (and
-/// 9 of the floor) where it stands, and the beam kept the wrong place (`robot-scans` seed 91
-/// scene 0 at 500 mm, docs/articulated-trials.md). The other links keep the floor's points:
-/// the beam's scores of a UR10 wrist near its place weigh too few points to lose those (an
-/// own-scan trial at 500 mm lost its wrist when no link counted them).
+/// The floor in a sample of scan points: which of them lie on it (by index into the sample;
+/// unmarked beyond its length), and its unit normal pointing up, to the side the scanner and
+/// the robot are on.
+#[derive(Clone, Copy)]
+pub(super) struct FloorMarks<'a> {
+    pub(super) on_floor: &'a [bool],
+    pub(super) up: Vector3<f64>,
+}
+
+/// [`coverage`] of the robot as `placed`, where the points `floor` marks never count for the
+/// base (the links no joint moves: the root link, and the links fixed to it, as a URDF's
+/// base_link fixed to a `world` link without geometry), only against it. A base stands on the
+/// floor and hides the floor under it; set down on the floor beside its place, its underside
+/// explains the floor there as well as it explains its own points: the ABB IRB 1600's base set
+/// down 0.33 m from its place, turned, covered 87 floor keypoints of a beam's 3000 and 27
+/// others, against 97 others (and 9 of the floor) where it stands, and the beam kept the wrong
+/// place (`robot-scans` seed 91 scene 0 at 500 mm, docs/articulated-trials.md).
+///
+/// The other links count the floor's points only where their surface faces up
+/// ([`Placed::evidence_seen_from`]): the top of a wrist held low, not the underside of an arm
+/// lying on the floor. Counted on any side, an arm lying on the floor explained more floor
+/// points than the robot's own: the CAD UR10 in a ray-cast scan that is mostly floor (2 658 of
+/// the beam's 2 802 keypoints) ranked only states lying on their side, 58-83 floor keypoints
+/// counting for each, more than its whole score. Counted by no link, an own-scan UR10 trial at
+/// 500 mm lost its wrist.
 pub(super) fn coverage_beside_floor(
     placed: &Placed,
     sample: &[Point3<f64>],
-    on_floor: &[bool],
+    floor: Option<FloorMarks>,
     links: &[usize],
     band: f64,
     parallel: bool,
@@ -544,16 +587,14 @@ pub(super) fn coverage_beside_floor(
     let (base, above_base): (Vec<usize>, Vec<usize>) = links
         .iter()
         .partition(|&&l| placed.body.movers(l).is_empty());
-    let with_base = !base.is_empty();
-    let one = |(index, p): (usize, &Point3<f64>)| {
-        if with_base && on_floor.get(index).copied().unwrap_or(false) {
-            match placed.evidence(p, band, band, &above_base) {
-                0 => placed.evidence(p, band, band, &base).min(0),
+    let one = |(index, p): (usize, &Point3<f64>)| match floor {
+        Some(FloorMarks { on_floor, up }) if on_floor.get(index).copied().unwrap_or(false) => {
+            match placed.evidence_seen_from(p, band, band, &above_base, Some(&up)) {
+                0 if !base.is_empty() => placed.evidence(p, band, band, &base).min(0),
                 evidence => evidence,
             }
-        } else {
-            placed.evidence(p, band, band, links)
         }
+        _ => placed.evidence(p, band, band, links),
     };
     if parallel {
         sample.par_iter().enumerate().map(one).sum()
