@@ -44,6 +44,7 @@ use self::local_reach::{local_first_band, within_local_reach};
 pub(crate) use self::look_again::align_cloud_pose;
 use self::look_again::{Located, locate_looking_again};
 use self::matching::{Lookup, correspond, near_surface};
+pub(crate) use self::model_to_scan::ModelSamples;
 pub use self::planes::without_large_planes as without_planes_larger_than;
 pub use self::planes::{floor_plane, on_a_plane, without_floor_under};
 use self::polish::polish;

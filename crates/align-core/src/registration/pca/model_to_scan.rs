@@ -111,13 +111,13 @@ fn build(points: &[Point3<f64>], order: &mut [u32], depth: usize) {
 type VoxelKey = (i64, i64, i64);
 
 /// Points on the part's surface about `spacing_m` apart (part frame), with their faces' normals.
-pub(super) struct ModelSamples {
-    pub(super) points: Vec<Point3<f64>>,
-    pub(super) normals: Vec<Vector3<f64>>,
+pub(crate) struct ModelSamples {
+    pub(crate) points: Vec<Point3<f64>>,
+    pub(crate) normals: Vec<Vector3<f64>>,
 }
 
 impl ModelSamples {
-    pub(super) fn new(mesh: &Mesh, spacing_m: f64) -> Self {
+    pub(crate) fn new(mesh: &Mesh, spacing_m: f64) -> Self {
         let mut rng = SplitMix64::new(0x5eed);
         let per_area = 4.0 / (spacing_m * spacing_m);
         let mut kept: HashMap<VoxelKey, (Point3<f64>, Vector3<f64>)> = HashMap::new();

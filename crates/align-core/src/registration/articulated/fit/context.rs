@@ -32,9 +32,12 @@ pub(super) struct FitContext<'a> {
     /// beam search keeps fewer states, and a joint that spins its own links in place keeps its
     /// value.
     pub(super) near: bool,
-    /// The floor under the scan (a point on it and its unit normal), found when the start is
-    /// neither near nor global: its points never count for the base in the beam's scores (see
-    /// [`super::placed::coverage_beside_floor`]).
+    /// The floor under the scan (a point on it and its unit normal, up), found when the start
+    /// is neither near nor global: its points never count for the base in the beam's scores
+    /// (see [`super::placed::coverage_beside_floor`]).
     pub(super) floor: Option<(Point3<f64>, Vector3<f64>)>,
+    /// The floor the base is stood on for more hypotheses (`FitContext::standing_candidates`):
+    /// [`Self::floor`], and from a global start too.
+    pub(super) stand_on: Option<(Point3<f64>, Vector3<f64>)>,
     pub(super) options: &'a RobotFitOptions,
 }

@@ -11,7 +11,9 @@
 //!    do not depend on the other joints: from runs that start at the start turned (the
 //!    exploration) and at translations of it on a grid, screened (the start may be off by more
 //!    than those links are big, and a run in a band that wide settles on whatever else it
-//!    holds).
+//!    holds); and where the scan shows a floor, the places where the base alone, stood on it,
+//!    is voted for by the keypoints at its height (`standing.rs`: a rigid run of the base with
+//!    the first joint's link settles on other shapes of the shoulder's girth).
 //! 2. Down the tree, a beam search: each joint's value by a 1-D search (coarse grid, then fine
 //!    around each of the best local maxima) scored by how many scan points the links it moves
 //!    explain (points buried inside a link count against it; points another link explains
@@ -26,7 +28,8 @@
 //!    a few refinement steps, a survivor whose steps took a joint out of its window as it was
 //!    before them. From a start neither
 //!    near nor global the floor's points never count for the base in those scores (a base set
-//!    down on the floor beside its place explains the floor under it).
+//!    down on the floor beside its place explains the floor under it), and count for the other
+//!    links only where their surface faces up (not under an arm lying on the floor).
 //! 3. All together: Gauss-Newton point-to-plane steps over the base pose and every joint, on
 //!    cos-weighted points within a band that shrinks to `band_min_m`, each point assigned to
 //!    its nearest link surface; the joints are searched once more near the answer
@@ -101,6 +104,7 @@ mod placed;
 mod placed_tests;
 mod refine;
 mod report;
+mod standing;
 #[cfg(test)]
 mod tests;
 mod tree;
@@ -259,9 +263,10 @@ pub fn align_robot(
     // base hypotheses are detected without the floor, and there, on the ABB IRB 1600 at 1000
     // mm, the floor-blind base lost one true place of 50 and a wrist (`robot-scans` seed 20,
     // scene 0 trial 0 and scene 1 trial 6; docs/articulated-trials.md).
-    let floor = start_mesh
+    // The global search stands the base on the floor for more hypotheses all the same.
+    let stand_on = start_mesh
         .as_ref()
-        .filter(|_| !near_start && !global)
+        .filter(|_| !near_start)
         .and_then(|mesh| floor_plane(&coarse, mesh, 3.0 * options.voxel_m));
     let fit = FitContext {
         body,
@@ -269,7 +274,8 @@ pub fn align_robot(
         delta_m,
         global,
         near: near_start,
-        floor,
+        floor: stand_on.filter(|_| !global),
+        stand_on,
         options,
     };
     let round_base = round_base_axis(body, q0, options);
@@ -279,6 +285,7 @@ pub fn align_robot(
         world_from_root_start,
         q0,
         round_base.as_ref(),
+        &[whole],
     ));
     let (mut world_from_root, mut q) = fit.beam_search(&hypotheses, q0);
     // Until the last refinement the surfaces come from the links' distance grids: a

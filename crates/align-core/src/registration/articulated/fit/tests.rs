@@ -146,6 +146,7 @@ fn a_square_base_turned_with_joint_1_making_up_for_it_is_turned_back() {
         global: false,
         near: false,
         floor: None,
+        stand_on: None,
         options: &options,
     };
     fit.base_turn_check(&mut base, &mut q);
@@ -437,6 +438,7 @@ fn with_keyed_wrist_scan<R>(
         global,
         near: false,
         floor: None,
+        stand_on: None,
         options: &options,
     })
 }
