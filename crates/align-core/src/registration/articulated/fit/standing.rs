@@ -33,6 +33,10 @@ const MAX_TURNS: usize = 90;
 /// probe, not kept); the CAD UR10's flat base draws some 70, at 2 ms.
 const MAX_VOTERS: usize = 800;
 
+/// Cells from the start's root to the edge of the voted square, at most: a turn's grid holds at
+/// most 1001 by 1001 cells (8 MB), half-band cells out to a 4.5 m bound.
+const MAX_CELLS_ACROSS_HALF: usize = 500;
+
 /// The best cells of each turn kept for the ranking.
 const CELLS_PER_TURN: usize = 64;
 
@@ -66,8 +70,9 @@ impl FitContext<'_> {
         let (across, along) = floor_axes(&up);
         let band = 3.0 * self.options.voxel_m;
         // Votes land within a cell of where a sample a band apart puts them: the 3 by 3 window
-        // of cells half a band wide holds them.
-        let cell_m = band / 2.0;
+        // of cells half a band wide holds them. A start off by metres (delta is the caller's)
+        // gets coarser cells instead of a grid of hundreds of megabytes.
+        let cell_m = (band / 2.0).max(bound_m / MAX_CELLS_ACROSS_HALF as f64);
         // The base's samples stood: height above the floor, and offset from the root along it.
         let root = stood.translation.vector;
         let samples = ModelSamples::new(&fixed, band);
@@ -375,6 +380,13 @@ mod tests {
             "{on_base} of {} side points on the base at {best}",
             sides.len()
         );
+        // A start off by tens of metres votes on coarser cells, not on a grid of gigabytes: the
+        // base is still found, to within a few of those 0.1 m cells.
+        let far = context.standing_candidates(&start, &q0, 50.0, None, 4);
+        let off_m = far
+            .first()
+            .map(|c| (c.translation.vector - truth.translation.vector).norm());
+        assert!(off_m.is_some_and(|off| off < 0.3), "{off_m:?}");
         // No floor, no standing.
         context.stand_on = None;
         assert!(
