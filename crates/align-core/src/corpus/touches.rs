@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use super::CorpusError;
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, tangents};
 use crate::rng::SplitMix64;
 
 /// How touches are drawn.
@@ -110,17 +110,6 @@ impl AreaSampler {
         let index = self.cumulative.partition_point(|&c| c <= target);
         index.min(self.cumulative.len() - 1) as u32
     }
-}
-
-/// Two unit vectors completing `n` to a right-handed frame.
-fn tangents(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let helper = if n.x.abs() < 0.8 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let e1 = n.cross(&helper).normalize();
-    (e1, n.cross(&e1))
 }
 
 /// Draws `count` touches on `mesh` standing at `base_from_part`.

@@ -16,6 +16,20 @@ pub use spread::{
     PLAUSIBLE_PART_SIZE_M, PrincipalSpread, human_length, implausible_size_warning, plane_through,
 };
 
+/// Two unit vectors completing the unit vector `n` to a right-handed frame (`n` their cross
+/// product): a plane's axes along it, for the plane whose normal is `n`.
+pub(crate) fn tangents(
+    n: &nalgebra::Vector3<f64>,
+) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+    let helper = if n.x.abs() < 0.8 {
+        nalgebra::Vector3::x()
+    } else {
+        nalgebra::Vector3::y()
+    };
+    let e1 = n.cross(&helper).normalize();
+    (e1, n.cross(&e1))
+}
+
 /// A search bound a hair beyond `distance_m`, so that the triangle at that distance is still
 /// found despite rounding.
 pub(crate) fn just_beyond(distance_m: f64) -> f64 {

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use super::context::FitContext;
 use super::tree::{axis_of, search_order};
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, tangents};
 use crate::registration::articulated::body::{ArticulatedBody, JointAxis};
 use crate::registration::pca::{ModelSamples, on_a_plane};
 
@@ -67,7 +67,7 @@ impl FitContext<'_> {
             return Vec::new();
         };
         let (_, up) = floor;
-        let (across, along) = floor_axes(&up);
+        let (across, along) = tangents(&up);
         let band = 3.0 * self.options.voxel_m;
         // Votes land within a cell of where a sample a band apart puts them: the 3 by 3 window
         // of cells half a band wide holds them. A start off by metres (delta is the caller's)
@@ -217,17 +217,6 @@ impl FitContext<'_> {
     }
 }
 
-/// Two unit vectors along the floor whose normal is `up`, square to each other.
-fn floor_axes(up: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let helper = if up.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let across = up.cross(&helper).normalize();
-    (across, up.cross(&across))
-}
-
 /// `world_from_root` stood on `floor` (a point on it and its unit normal, up): turned the least
 /// that puts the first joint's axis along the floor's normal, pointing away from it, and moved
 /// along the normal until the lowest point of `mesh` (root frame) lies on the floor. `None`
@@ -245,10 +234,7 @@ pub(super) fn standing_on(
     let axis_world = world_from_root.rotation * axis.axis.normalize();
     // Upside down, any half turn about a line along the floor stands it up.
     let turn = UnitQuaternion::rotation_between(&axis_world, up).unwrap_or_else(|| {
-        UnitQuaternion::from_axis_angle(
-            &Unit::new_normalize(floor_axes(up).0),
-            std::f64::consts::PI,
-        )
+        UnitQuaternion::from_axis_angle(&Unit::new_normalize(tangents(up).0), std::f64::consts::PI)
     });
     let rotation = turn * world_from_root.rotation;
     let lowest_m = mesh
