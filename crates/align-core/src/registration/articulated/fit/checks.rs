@@ -310,6 +310,12 @@ impl FitContext<'_> {
         // (the fit's count, the other's) where they differ; `None` once refined into the fit.
         let mut scored: Vec<_> = others
             .iter()
+            // Within a keypoint voxel of the fit at every vertex, a state is the fit at the
+            // keypoints' resolution, and refined it returns there (as `second_look`'s candidates
+            // do): the flip check's states of a joint the scan does not show, refined on the
+            // coarse keypoints only, lie 1-3 mm from the fit on the CAD robots, and refining
+            // each to find that out was 11-25 ms of a 100 mm fit (docs/BENCHMARKS.md).
+            .filter(|(base, other_q)| !self.vertices_within(fit, (base, other_q), options.voxel_m))
             .filter_map(|(base, other_q)| {
                 let counts = self.contrast(fit, (base, other_q))?;
                 Some((Some(counts), *base, other_q.clone()))

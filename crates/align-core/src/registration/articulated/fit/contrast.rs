@@ -86,6 +86,26 @@ impl FitContext<'_> {
             .collect()
     }
 
+    /// Whether `b` puts every vertex of every link within `within_m` of where `a` puts it: the
+    /// same configuration, not only the same surfaces (a round link turned half a turn covers
+    /// its own surface with every vertex moved).
+    pub(super) fn vertices_within(&self, a: State, b: State, within_m: f64) -> bool {
+        let at_a = self.body.link_poses(a.0, a.1);
+        let at_b = self.body.link_poses(b.0, b.1);
+        self.body
+            .links()
+            .iter()
+            .zip(at_a.iter().zip(&at_b))
+            .all(|(link, (pose_a, pose_b))| {
+                let Some(mesh) = &link.surface else {
+                    return true;
+                };
+                let b_from_a = pose_b.inverse() * pose_a;
+                mesh.vertices()
+                    .all(|v| (b_from_a * v - v).norm_squared() <= within_m * within_m)
+            })
+    }
+
     /// How many fine keypoints each state explains where the two differ, `(a's, b's)`; `None`
     /// when they place every link alike. The points are those near a link the two place apart
     /// (in either state) that no other link explains; each counts as [`Placed::evidence`] says

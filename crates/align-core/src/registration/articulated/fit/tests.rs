@@ -466,22 +466,30 @@ fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart()
             let mesh = body.links()[flange].surface.as_ref().unwrap();
             assert!(mesh.deviation_m(&at_fit[flange], &at_twin[flange]) < 1e-6);
             let observed = vec![true; q_true.len()];
+            // Every vertex of the flange moves, though its surface stays: not the fit's state.
+            assert!(!fit.vertices_within(
+                (&truth, &q_true),
+                (&truth, &twin_q),
+                fit.options.voxel_m
+            ));
             // The state it started from, identical to the fit, is no twin.
             assert_eq!(
                 fit.twin(&truth, &q_true, &[(truth, q_true.clone())], &observed),
                 None
             );
-            // Nor is a copy a few millimetres off, which a refinement takes back to the fit: scored
-            // as it is, it explains nearly as much and would be called ambiguous.
+            // Nor is a copy a few millimetres off, the fit at the keypoints' resolution: scored as
+            // it is, it explains nearly as much and would be called ambiguous.
             let mut near_q = q_true.clone();
             near_q[2] += 0.004;
             let (fit_there, near_there) =
                 fit.contrast((&truth, &q_true), (&truth, &near_q)).unwrap();
             assert!(fit_there - near_there < 12, "{fit_there} {near_there}");
             assert_eq!(
-                fit.twin(&truth, &q_true, &[(truth, near_q)], &observed),
+                fit.twin(&truth, &q_true, &[(truth, near_q.clone())], &observed),
                 None
             );
+            // Within a keypoint voxel at every vertex, it is not even refined.
+            assert!(fit.vertices_within((&truth, &q_true), (&truth, &near_q), fit.options.voxel_m));
             fit.twin(
                 &truth,
                 &q_true,
