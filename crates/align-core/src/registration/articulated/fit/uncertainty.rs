@@ -63,7 +63,7 @@ pub(super) fn joint_intervals_95(
     let mut row = DVector::zeros(columns.len());
     let mut normal = DMatrix::zeros(columns.len(), columns.len());
     for (m, _) in matches.iter().zip(&scale.kept).filter(|(_, kept)| **kept) {
-        rows.fill(m, &mut full);
+        rows.fill(m, full.as_mut_slice());
         for (entry, &column) in row.iter_mut().zip(&columns) {
             *entry = full[column];
         }
