@@ -203,8 +203,8 @@ impl NormalEquations {
 
 /// J^T W J and J^T W r of the point-to-plane residuals, and each link's own J^T W J when
 /// `per_link`; rotations (base and revolute joints) are scaled by `scale` (m) so that every
-/// column is in metres. With `parallel`, blocks of [`MATCHES_PER_BLOCK`] matches are summed
-/// side by side and their sums added in block order: the same answer on any number of threads.
+/// column is in metres. The sums run over blocks of [`MATCHES_PER_BLOCK`] matches, side by side
+/// with `parallel`, and are added in block order: the same answer with or without threads.
 pub(super) fn normal_equations(
     body: &ArticulatedBody,
     placed: &Placed,
@@ -217,11 +217,15 @@ pub(super) fn normal_equations(
     let rows = JacobianRows::new(body, placed, scale);
     let links = if per_link { body.links().len() } else { 1 };
     let sum = |some: &[Match]| Sums::of(some, &rows, n, links, per_link);
-    let mut blocks: Vec<Sums> = if parallel && matches.len() > MATCHES_PER_BLOCK {
+    // The same blocks either way, so that a fit is the same with and without threads.
+    let mut blocks: Vec<Sums> = if parallel {
         matches.par_chunks(MATCHES_PER_BLOCK).map(sum).collect()
     } else {
-        vec![sum(matches)]
+        matches.chunks(MATCHES_PER_BLOCK).map(sum).collect()
     };
+    if blocks.is_empty() {
+        blocks.push(sum(&[]));
+    }
     let mut sums = blocks.remove(0);
     for other in &blocks {
         sums.add(other);
