@@ -103,6 +103,8 @@ mod placed;
 #[cfg(test)]
 mod placed_tests;
 mod refine;
+#[cfg(test)]
+mod refine_tests;
 mod report;
 mod standing;
 #[cfg(test)]
