@@ -291,7 +291,8 @@ impl FitContext<'_> {
     /// exact surfaces. One within the margin is refined the same way before it is called a twin:
     /// a copy of the fit's own pose a few hundredths of a radian off would otherwise be reported
     /// as another pose that explains the scan as well (the ABB IRB 1600 at 500 mm, in half the
-    /// trials). Joints not `observed` keep the value they have (the start's).
+    /// trials). One within a keypoint voxel of the fit at every vertex is the fit, unrefined.
+    /// Joints not `observed` keep the value they have (the start's).
     pub(super) fn twin(
         &self,
         world_from_root: &Isometry3<f64>,
