@@ -8,6 +8,16 @@ use crate::registration::articulated::body::ArticulatedBody;
 use crate::robots::ShippedRobot;
 use crate::trials::TrialRng;
 
+/// The shipped UR10 at its home joints, its root at (0.2, -0.1, 0) m.
+fn ur10_at_home() -> (ArticulatedBody, Isometry3<f64>, Vec<f64>) {
+    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
+    (
+        body,
+        Isometry3::translation(0.2, -0.1, 0.0),
+        ShippedRobot::Ur10.home(),
+    )
+}
+
 /// At least `count` matches of points 2 mm off random surface points of random links, placed.
 fn matches_near_surfaces(
     body: &ArticulatedBody,
@@ -43,9 +53,7 @@ fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
     // refinement compares with its tolerance. The rank-one updates fill one triangle; a
     // product with that triangle alone miscounts every coupling (the base's yaw against
     // the first joint's), and the refinement then ran to its limit on most starts.
-    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
-    let base = Isometry3::translation(0.2, -0.1, 0.0);
-    let q = ShippedRobot::Ur10.home();
+    let (body, base, q) = ur10_at_home();
     let placed = Placed::new(&body, &base, &q);
     let matches = matches_near_surfaces(&body, &placed, 11, 400);
     let scale = placed_radius(&placed);
@@ -89,9 +97,7 @@ fn the_normal_matrix_measures_a_step_as_the_points_normal_motions_do() {
 fn the_normal_equations_are_the_sums_nalgebra_s_rank_one_updates_make_to_the_last_bit() {
     // The refinement's sums are written out by hand for speed; every trial row was measured
     // with nalgebra's `syger` and `axpy`, so the hand-written sums must be those, bit for bit.
-    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
-    let base = Isometry3::translation(0.2, -0.1, 0.0);
-    let q = ShippedRobot::Ur10.home();
+    let (body, base, q) = ur10_at_home();
     let placed = Placed::new(&body, &base, &q);
     let matches = matches_near_surfaces(&body, &placed, 13, 500);
     let scale = placed_radius(&placed);
@@ -143,9 +149,7 @@ fn the_refinements_stop_measures_a_step_on_the_link_it_moves_most() {
     // A step that turns only the last wrist joint moves a few hundredths of the points: over
     // all of them its motion is diluted below the tolerance, and the refinement stopped with
     // a wrist still moving. The measure is each link's own RMS motion along the normals.
-    let body = ArticulatedBody::from_model(&ShippedRobot::Ur10.model().unwrap()).unwrap();
-    let base = Isometry3::translation(0.2, -0.1, 0.0);
-    let q = ShippedRobot::Ur10.home();
+    let (body, base, q) = ur10_at_home();
     let placed = Placed::new(&body, &base, &q);
     let mut matches = matches_near_surfaces(&body, &placed, 12, 2000);
     // Most points on the base and the arm, a few on the wrist joint's links, as in a scan.

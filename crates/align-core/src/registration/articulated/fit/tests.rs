@@ -330,12 +330,23 @@ fn a_wrist_twin_is_reported_ambiguous_only_when_the_scan_barely_tells_it_apart()
             let mesh = body.links()[flange].surface.as_ref().unwrap();
             assert!(mesh.deviation_m(&at_fit[flange], &at_twin[flange]) < 1e-6);
             let observed = vec![true; q_true.len()];
-            // Every vertex of the flange moves, though its surface stays: not the fit's state.
-            assert!(!fit.vertices_within(
-                (&truth, &q_true),
-                (&truth, &twin_q),
-                fit.options.voxel_m
-            ));
+            // The round flange spun half a turn leaves every link's surface where it was, but
+            // moves the flange's vertices: not the fit's state (nor is the twin).
+            let mut spun_q = q_true.clone();
+            spun_q[5] += PI;
+            let at_spun = body.link_poses(&truth, &spun_q);
+            for ((link, at), spun) in body.links().iter().zip(&at_fit).zip(&at_spun) {
+                if let Some(surface) = &link.surface {
+                    assert!(surface.deviation_m(at, spun) < 1e-6, "{}", link.name);
+                }
+            }
+            for other in [&spun_q, &twin_q] {
+                assert!(!fit.vertices_within(
+                    (&truth, &q_true),
+                    (&truth, other),
+                    fit.options.voxel_m
+                ));
+            }
             // The state it started from, identical to the fit, is no twin.
             assert_eq!(
                 fit.twin(&truth, &q_true, &[(truth, q_true.clone())], &observed),
