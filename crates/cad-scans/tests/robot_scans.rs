@@ -352,3 +352,17 @@ fn the_cad_ur10_base_stood_on_the_floor_is_found_at_500_mm() {
     };
     no_link_fails(&body, &ShippedRobot::Ur10.home(), 0, 0.5, &[0, 1]);
 }
+
+/// In scene 3 at 500 mm the base stood on the floor at its place was among the hypotheses, but
+/// after the first joint the beam ranks states on the base and shoulder alone, and the places
+/// the folded arm offers them explained more (16 keypoints for the truth against 18-28): the
+/// base was lost in trials 2, 6, 10 and 11 (a probe, not kept). Each hypothesis's best state
+/// now goes on to the second joint, where the arm decides; trials 6 and 10 are fitted (trial
+/// 2 turns the nearly round base, trial 11 loses the arm after the second joint).
+#[test]
+fn the_cad_ur10_base_ranked_low_on_its_first_link_is_kept_for_its_arm_at_500_mm() {
+    let Some(body) = ur10_cad() else {
+        return;
+    };
+    no_link_fails(&body, &ShippedRobot::Ur10.home(), 3, 0.5, &[6, 10]);
+}

@@ -25,10 +25,11 @@ const PEAKS_PER_STATE: usize = 3;
 /// A state of the beam search: the base pose and every joint's value.
 type BeamState = (Isometry3<f64>, Vec<f64>);
 
-/// The states one joint's searches lead to: each state with each of its candidate values (and
-/// the partner's and deferred joints' values), and a state whose search found nothing to score
-/// unchanged; reached twice, a state is kept once. `None` when no state's search found anything:
-/// the joint is then left out of the decided links.
+/// The states one joint's searches lead to, each with the index in `beam` of the state it came
+/// from: each state with each of its candidate values (and the partner's and deferred joints'
+/// values), and a state whose search found nothing to score unchanged; reached twice, a state is
+/// kept once. `None` when no state's search found anything: the joint is then left out of the
+/// decided links.
 ///
 /// A state whose search has nothing to score (no keypoint near the joint that the links above
 /// it leave unexplained) keeps the joint where it is. Dropped, it took a right base with it: on
@@ -40,12 +41,12 @@ pub(super) fn next_states(
     searched: Vec<Vec<Candidate>>,
     parameter: usize,
     options: &RobotFitOptions,
-) -> Option<Vec<BeamState>> {
-    let mut next: Vec<BeamState> = Vec::new();
+) -> Option<Vec<(BeamState, usize)>> {
+    let mut next: Vec<(BeamState, usize)> = Vec::new();
     let mut unsearched = Vec::new();
-    for ((base, q), candidates) in beam.iter().zip(searched) {
+    for (from, ((base, q), candidates)) in beam.iter().zip(searched).enumerate() {
         if candidates.is_empty() {
-            unsearched.push((*base, q.clone()));
+            unsearched.push(((*base, q.clone()), from));
         }
         for candidate in candidates {
             let mut q = q.clone();
@@ -55,20 +56,63 @@ pub(super) fn next_states(
             }
             // States that reached the same configuration are settled once.
             let state = (*base, q);
-            if !next.iter().any(|other| same_state(other, &state, options)) {
-                next.push(state);
+            if !next
+                .iter()
+                .any(|(other, _)| same_state(other, &state, options))
+            {
+                next.push((state, from));
             }
         }
     }
     if next.is_empty() {
         return None;
     }
-    for state in unsearched {
-        if !next.iter().any(|other| same_state(other, &state, options)) {
-            next.push(state);
+    for (state, from) in unsearched {
+        if !next
+            .iter()
+            .any(|(other, _)| same_state(other, &state, options))
+        {
+            next.push((state, from));
         }
     }
     Some(next)
+}
+
+/// A settled state of the beam: its score, the state and the base hypothesis it descends from.
+pub(super) type ScoredState = (i64, BeamState, usize);
+
+/// The states the beam goes on with: the `width` best-scored distinct states and, at the first
+/// cut (`each_hypothesis`), each base hypothesis's best distinct state as well, best first.
+///
+/// After the first joint only the base and the first link are decided, and the places a folded
+/// arm offers them may explain more than the true one: on the UR10 with CAD links (`robot-scans
+/// --seed 20`, scene 3 at 500 mm) the base stood on the floor at its place scored 16 keypoints
+/// against 18-28 for the other hypotheses' states and was 11th of 39, below the six kept. Each
+/// hypothesis is judged with its arm by the next joint's cut; the beam is as wide as before
+/// from there.
+pub(super) fn keep_best(
+    mut scored: Vec<ScoredState>,
+    width: usize,
+    each_hypothesis: bool,
+    options: &RobotFitOptions,
+) -> Vec<(BeamState, usize)> {
+    // Stable: among equal scores the order of the searches decides, as if one by one.
+    scored.sort_by_key(|s| std::cmp::Reverse(s.0));
+    let mut kept: Vec<(BeamState, usize)> = Vec::new();
+    for (_, state, origin) in scored {
+        let full = kept.len() >= width;
+        if full && !(each_hypothesis && kept.iter().all(|(_, o)| *o != origin)) {
+            continue;
+        }
+        // Two hypotheses that reached the same configuration would spend the beam twice.
+        if !kept
+            .iter()
+            .any(|(other, _)| same_state(other, &state, options))
+        {
+            kept.push((state, origin));
+        }
+    }
+    kept
 }
 
 /// Two search states closer than a keypoint voxel (base) and a milliradian (every joint).
@@ -131,6 +175,8 @@ impl FitContext<'_> {
             .filter(|&l| body.links()[l].surface.is_some())
             .collect();
         let mut beam: Vec<BeamState> = hypotheses.iter().map(|h| (*h, q0.to_vec())).collect();
+        // The base hypothesis each state of the beam descends from.
+        let mut origins: Vec<usize> = (0..hypotheses.len()).collect();
         let mut searched: Vec<usize> = Vec::new();
         for parameter in search_order(body) {
             // The states are searched side by side (each search is parallel too, but its last
@@ -152,6 +198,12 @@ impl FitContext<'_> {
                 continue;
             };
             searched.push(parameter);
+            // Each hypothesis's best state is kept through the first cut from a start that is
+            // local (see `keep_best`); a global start's hypotheses are the detection's best
+            // few dozen bases, and keeping each (40 states where 6 go on) cost the CAD UR10 37 %
+            // more time at 1000 mm in ray-cast scans for one fit of ten (a probe,
+            // docs/articulated-trials.md).
+            let first_cut = searched.len() == 1 && !global;
             let decided: Vec<usize> = with_surface
                 .iter()
                 .copied()
@@ -162,7 +214,7 @@ impl FitContext<'_> {
                 ..options.clone()
             };
             let settle_band = 2.0 * band;
-            let settle_one = |(mut base, mut q): BeamState| {
+            let settle_one = |((mut base, mut q), from): (BeamState, usize)| {
                 if settle.max_iterations > 0 {
                     refine_links(
                         body,
@@ -178,26 +230,16 @@ impl FitContext<'_> {
                         },
                     );
                 }
-                (score(&base, &q, &decided), base, q)
+                (score(&base, &q, &decided), (base, q), origins[from])
             };
-            let mut scored: Vec<(i64, Isometry3<f64>, Vec<f64>)> = if options.parallel {
+            let scored: Vec<ScoredState> = if options.parallel {
                 next.into_par_iter().map(settle_one).collect()
             } else {
                 next.into_iter().map(settle_one).collect()
             };
-            scored.sort_by_key(|s| std::cmp::Reverse(s.0));
-            // Keep distinct states only: two hypotheses that reached the same configuration
-            // would spend the beam twice.
-            beam.clear();
-            for (_, base, q) in scored {
-                let state = (base, q);
-                if !beam.iter().any(|other| same_state(other, &state, options)) {
-                    beam.push(state);
-                }
-                if beam.len() == width {
-                    break;
-                }
-            }
+            (beam, origins) = keep_best(scored, width, first_cut, options)
+                .into_iter()
+                .unzip();
         }
         if beam.len() == 1 {
             return beam.pop().expect("one state");

@@ -24,7 +24,9 @@
 //!    for) are settled by a few damped refinement steps, and the `beam_width` states whose
 //!    decided links explain the most points go on: a joint misled by links below it that are
 //!    still far off survives as a runner-up until those links decide; a state whose search
-//!    finds nothing to score goes on with the joint where it is. The survivors are ranked after
+//!    finds nothing to score goes on with the joint where it is. From a start that is not
+//!    global each base hypothesis's best state also goes on past the first joint (the base and
+//!    one link are too little to judge a base by; `beam::keep_best`). The survivors are ranked after
 //!    a few refinement steps, a survivor whose steps took a joint out of its window as it was
 //!    before them. From a start neither
 //!    near nor global the floor's points never count for the base in those scores (a base set
