@@ -199,7 +199,7 @@ impl FitContext<'_> {
             };
             searched.push(parameter);
             // Each hypothesis's best state is kept through the first cut from a start that is
-            // local (see `keep_best`); a global start's hypotheses are the detection's best
+            // not global (see `keep_best`); a global start's hypotheses are the detection's best
             // few dozen bases, and keeping each (40 states where 6 go on) cost the CAD UR10 37 %
             // more time at 1000 mm in ray-cast scans for one fit of ten (a probe,
             // docs/articulated-trials.md).

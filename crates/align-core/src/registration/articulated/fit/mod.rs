@@ -26,9 +26,9 @@
 //!    still far off survives as a runner-up until those links decide; a state whose search
 //!    finds nothing to score goes on with the joint where it is. From a start that is not
 //!    global each base hypothesis's best state also goes on past the first joint (the base and
-//!    one link are too little to judge a base by; `beam::keep_best`). The survivors are ranked after
-//!    a few refinement steps, a survivor whose steps took a joint out of its window as it was
-//!    before them. From a start neither
+//!    one link are too little to judge a base by; `beam::keep_best`). The survivors are ranked
+//!    after a few refinement steps, a survivor whose steps took a joint out of its window as it
+//!    was before them. From a start neither
 //!    near nor global the floor's points never count for the base in those scores (a base set
 //!    down on the floor beside its place explains the floor under it), and count for the other
 //!    links only where their surface faces up (not under an arm lying on the floor).
