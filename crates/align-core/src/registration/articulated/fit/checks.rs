@@ -26,7 +26,7 @@ const TWINS_REFINED: usize = 3;
 /// kept a flip).
 const FLIP_ROUNDS: usize = 3;
 
-/// Coarse turns of the base [`FitContext::base_turn_check`] looks at finely.
+/// Coarse turns of the base [`FitContext::base_turn_check`] looks at finely, from each band.
 const BASE_TURN_PEAKS: usize = 4;
 
 /// Coarse steps between two of those turns at least: twelve keypoint voxels at the base's
